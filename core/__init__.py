@@ -1,0 +1,1 @@
+"""Geolocation engine: geodesy, DEM, ray casting, cameras (no web imports)."""

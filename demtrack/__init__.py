@@ -1,0 +1,1 @@
+"""demtrack: geospatial trajectories from calibrated cameras and a DEM."""

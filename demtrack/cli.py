@@ -1,0 +1,3 @@
+"""Command-line entry point."""
+def main() -> None:
+    print("hi")

@@ -1,0 +1,1 @@
+"""FastAPI operator console backend."""
