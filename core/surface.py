@@ -1,0 +1,53 @@
+"""The terrain surface: bilinear interpolation of cell-centre values.
+
+One function, shared by :meth:`Dem.sample`, hole filling and the reference ray caster, so
+the surface that is sampled is exactly the surface that rays hit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["bilinear_sample"]
+
+
+def bilinear_sample(values: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
+    """Bilinear interpolation of a grid of cell-centre values.
+
+    Parameters
+    ----------
+    values : ndarray, shape (nrows, ncols)
+        Cell-centre values; NaN marks nodata.
+    gx, gy : array_like
+        Fractional column and row indices of cell centres (see ``core.grid``).
+
+    Returns
+    -------
+    ndarray, float64, broadcast shape of ``gx`` and ``gy``
+        NaN outside ``[0, ncols-1] x [0, nrows-1]`` or where any of the four
+        surrounding centres is NaN.
+    """
+    gx, gy = np.broadcast_arrays(np.asarray(gx, dtype=np.float64),
+                                 np.asarray(gy, dtype=np.float64))
+    nrows, ncols = values.shape
+    out = np.full(gx.shape, np.nan)
+    inside = (gx >= 0) & (gx <= ncols - 1) & (gy >= 0) & (gy <= nrows - 1)
+    if not inside.any():
+        return out
+    x = gx[inside]
+    y = gy[inside]
+    # The last row/column belong to the patch before them so that c+1 stays in range.
+    c = np.minimum(np.floor(x).astype(np.int64), max(ncols - 2, 0))
+    r = np.minimum(np.floor(y).astype(np.int64), max(nrows - 2, 0))
+    s = x - c
+    t = y - r
+    c1 = np.minimum(c + 1, ncols - 1)
+    r1 = np.minimum(r + 1, nrows - 1)
+    v = values.astype(np.float64, copy=False)
+    z00 = v[r, c]
+    z01 = v[r, c1]
+    z10 = v[r1, c]
+    z11 = v[r1, c1]
+    out[inside] = (z00 * (1 - s) * (1 - t) + z01 * s * (1 - t)
+                   + z10 * (1 - s) * t + z11 * s * t)
+    return out
