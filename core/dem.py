@@ -65,18 +65,26 @@ class Dem:
             raise DemError(f"elevation has shape {elev.shape}, grid says {shape}")
         if np.isinf(elev).any():
             raise DemError("elevation contains infinite values")
-        var = (np.zeros(shape, np.float32) if self.variance is None
-               else np.ascontiguousarray(self.variance, dtype=np.float32))
-        cnt = (np.zeros(shape, np.int32) if self.count is None
-               else np.ascontiguousarray(self.count, dtype=np.int32))
-        fil = (np.zeros(shape, bool) if self.filled is None
-               else np.ascontiguousarray(self.filled, dtype=bool))
+        var = (
+            np.zeros(shape, np.float32)
+            if self.variance is None
+            else np.ascontiguousarray(self.variance, dtype=np.float32)
+        )
+        cnt = (
+            np.zeros(shape, np.int32)
+            if self.count is None
+            else np.ascontiguousarray(self.count, dtype=np.int32)
+        )
+        fil = (
+            np.zeros(shape, bool)
+            if self.filled is None
+            else np.ascontiguousarray(self.filled, dtype=bool)
+        )
         for name, arr in (("variance", var), ("count", cnt), ("filled", fil)):
             if arr.shape != shape:
                 raise DemError(f"{name} has shape {arr.shape}, grid says {shape}")
         var = np.where(np.isnan(elev), np.float32(np.nan), var).astype(np.float32)
-        for name, arr in (("elevation", elev), ("variance", var), ("count", cnt),
-                          ("filled", fil)):
+        for name, arr in (("elevation", elev), ("variance", var), ("count", cnt), ("filled", fil)):
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
 
@@ -99,9 +107,13 @@ class Dem:
 
     # ------------------------------------------------------------------ building
     @classmethod
-    def from_points(cls, xyz: np.ndarray, cell_size: float = 0.5,
-                    bounds: tuple[float, float, float, float] | None = None,
-                    crs_wkt: str | None = None) -> Dem:
+    def from_points(
+        cls,
+        xyz: np.ndarray,
+        cell_size: float = 0.5,
+        bounds: tuple[float, float, float, float] | None = None,
+        crs_wkt: str | None = None,
+    ) -> Dem:
         """Grid a point cloud: per cell mean elevation, variance and count.
 
         Parameters
@@ -139,8 +151,9 @@ class Dem:
             # +1 cell so a point on the max edge still falls inside.
             ncols = int(np.floor((pts[:, 0].max() - x0) / cell_size)) + 1
             nrows = int(np.floor((pts[:, 1].max() - y0) / cell_size)) + 1
-            grid = GridSpec(float(x0), float(y0 + nrows * cell_size), float(cell_size),
-                            nrows, ncols)
+            grid = GridSpec(
+                float(x0), float(y0 + nrows * cell_size), float(cell_size), nrows, ncols
+            )
         else:
             grid = GridSpec.covering(*map(float, bounds), float(cell_size))
         rows, cols = grid.cell_of(pts[:, 0], pts[:, 1])
@@ -157,8 +170,14 @@ class Dem:
         with np.errstate(invalid="ignore", divide="ignore"):
             variance = variance / count
         shape = grid.shape
-        return cls(grid, mean.reshape(shape), variance.reshape(shape),
-                   count.reshape(shape).astype(np.int32), None, crs_wkt)
+        return cls(
+            grid,
+            mean.reshape(shape),
+            variance.reshape(shape),
+            count.reshape(shape).astype(np.int32),
+            None,
+            crs_wkt,
+        )
 
     def fill_holes(self, coarse: Dem, coarse_sigma_m: float = 1.0) -> Dem:
         """Fill empty cells by bilinear interpolation of a coarser DEM.
@@ -186,7 +205,7 @@ class Dem:
         elev = np.array(self.elevation)
         var = np.array(self.variance)
         elev[holes] = z
-        var[holes] = np.float32(coarse_sigma_m ** 2)
+        var[holes] = np.float32(coarse_sigma_m**2)
         filled = np.array(self.filled)
         filled[holes] = np.isfinite(z)
         return replace(self, elevation=elev, variance=var, filled=filled)
@@ -222,9 +241,17 @@ class Dem:
 
         g = self.grid
         profile = {
-            "driver": "GTiff", "height": g.nrows, "width": g.ncols, "count": 3,
-            "dtype": "float32", "transform": g.transform, "nodata": float("nan"),
-            "compress": "deflate", "tiled": True, "blockxsize": 256, "blockysize": 256,
+            "driver": "GTiff",
+            "height": g.nrows,
+            "width": g.ncols,
+            "count": 3,
+            "dtype": "float32",
+            "transform": g.transform,
+            "nodata": float("nan"),
+            "compress": "deflate",
+            "tiled": True,
+            "blockxsize": 256,
+            "blockysize": 256,
         }
         if g.nrows < 256 or g.ncols < 256:
             profile.update(tiled=False)

@@ -16,6 +16,7 @@ __all__ = [
     "DetectionError",
     "GeodesyError",
     "InputFileError",
+    "RaycastError",
     "SiteError",
     "TrackingError",
 ]
@@ -47,6 +48,10 @@ class CalibrationError(DemtrackError, ValueError):
 
 class SiteError(DemtrackError, ValueError):
     """A site folder that is missing, incomplete or inconsistent."""
+
+
+class RaycastError(DemtrackError, ValueError):
+    """Malformed ray-casting input (ray arrays, range, mode, hit limit)."""
 
 
 class InputFileError(DemtrackError, ValueError):

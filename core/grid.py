@@ -99,8 +99,9 @@ class GridSpec:
         return cls(float(transform.c), float(transform.f), float(transform.a), nrows, ncols)
 
     @classmethod
-    def covering(cls, x_min: float, y_min: float, x_max: float, y_max: float,
-                 cell_m: float) -> GridSpec:
+    def covering(
+        cls, x_min: float, y_min: float, x_max: float, y_max: float, cell_m: float
+    ) -> GridSpec:
         """Smallest grid with origin ``(x_min, y_max)`` whose cells cover the box."""
         if not (x_max > x_min and y_max > y_min):
             raise DemError(f"empty bounds ({x_min}, {y_min}, {x_max}, {y_max})")
@@ -125,11 +126,14 @@ class GridSpec:
         col = np.floor((np.asarray(x, dtype=np.float64) - self.x_min) / self.cell_m)
         row = np.floor((self.y_max - np.asarray(y, dtype=np.float64)) / self.cell_m)
         inside = (col >= 0) & (col < self.ncols) & (row >= 0) & (row < self.nrows)
-        return (np.where(inside, row, -1).astype(np.int64),
-                np.where(inside, col, -1).astype(np.int64))
+        return (
+            np.where(inside, row, -1).astype(np.int64),
+            np.where(inside, col, -1).astype(np.int64),
+        )
 
     def centres(self) -> tuple[np.ndarray, np.ndarray]:
         """Cell-centre coordinates as two ``(nrows, ncols)`` arrays ``(x, y)``."""
-        gx, gy = np.meshgrid(np.arange(self.ncols, dtype=np.float64),
-                             np.arange(self.nrows, dtype=np.float64))
+        gx, gy = np.meshgrid(
+            np.arange(self.ncols, dtype=np.float64), np.arange(self.nrows, dtype=np.float64)
+        )
         return self.from_grid(gx, gy)

@@ -27,8 +27,7 @@ def bilinear_sample(values: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> np.nd
         NaN outside ``[0, ncols-1] x [0, nrows-1]`` or where any of the four
         surrounding centres is NaN.
     """
-    gx, gy = np.broadcast_arrays(np.asarray(gx, dtype=np.float64),
-                                 np.asarray(gy, dtype=np.float64))
+    gx, gy = np.broadcast_arrays(np.asarray(gx, dtype=np.float64), np.asarray(gy, dtype=np.float64))
     nrows, ncols = values.shape
     out = np.full(gx.shape, np.nan)
     inside = (gx >= 0) & (gx <= ncols - 1) & (gy >= 0) & (gy <= nrows - 1)
@@ -48,6 +47,5 @@ def bilinear_sample(values: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> np.nd
     z01 = v[r, c1]
     z10 = v[r1, c]
     z11 = v[r1, c1]
-    out[inside] = (z00 * (1 - s) * (1 - t) + z01 * s * (1 - t)
-                   + z10 * (1 - s) * t + z11 * s * t)
+    out[inside] = z00 * (1 - s) * (1 - t) + z01 * s * (1 - t) + z10 * (1 - s) * t + z11 * s * t
     return out

@@ -1,3 +1,5 @@
 """Command-line entry point."""
+
+
 def main() -> None:
     print("hi")

@@ -31,8 +31,9 @@ def _reference_stats(xyz, grid):
 
 def test_from_points_matches_reference_statistics():
     rng = np.random.default_rng(0)
-    xyz = np.column_stack([rng.uniform(3, 13, 4000), rng.uniform(-7, 2, 4000),
-                           rng.normal(300, 2, 4000)])
+    xyz = np.column_stack(
+        [rng.uniform(3, 13, 4000), rng.uniform(-7, 2, 4000), rng.normal(300, 2, 4000)]
+    )
     dem = Dem.from_points(xyz, cell_size=0.5)
     assert dem.grid.x_min == 3.0 and dem.grid.y_min == -7.0
     mean, var, cnt = _reference_stats(xyz, dem.grid)
@@ -44,8 +45,9 @@ def test_from_points_matches_reference_statistics():
 
 def test_from_points_with_bounds_drops_outside_points_and_keeps_edges():
     # Cells are half-open: [x_min, x_max) x (y_min, y_max]; a point on the south edge is out.
-    xyz = np.array([[0.0, 0.2, 1.0], [0.99, 0.99, 3.0], [1.0, 0.5, 7.0], [-0.1, 0.5, 9.0],
-                    [0.5, 0.0, 11.0]])
+    xyz = np.array(
+        [[0.0, 0.2, 1.0], [0.99, 0.99, 3.0], [1.0, 0.5, 7.0], [-0.1, 0.5, 9.0], [0.5, 0.0, 11.0]]
+    )
     dem = Dem.from_points(xyz, cell_size=1.0, bounds=(0, 0, 2, 1))
     assert dem.grid.shape == (1, 2)
     assert dem.elevation[0, 0] == pytest.approx(2.0)
@@ -94,8 +96,12 @@ def test_sample_reproduces_cell_centre_values_and_bilinear_midpoints(s, t):
     z = rng.normal(size=(2, 2)).astype(np.float32)
     dem = Dem(grid, z)
     x, y = grid.from_grid(np.array([s]), np.array([t]))
-    expected = (z[0, 0] * (1 - s) * (1 - t) + z[0, 1] * s * (1 - t)
-                + z[1, 0] * (1 - s) * t + z[1, 1] * s * t)
+    expected = (
+        z[0, 0] * (1 - s) * (1 - t)
+        + z[0, 1] * s * (1 - t)
+        + z[1, 0] * (1 - s) * t
+        + z[1, 1] * s * t
+    )
     assert dem.sample(x, y)[0] == pytest.approx(expected, abs=1e-6)
 
 
@@ -127,8 +133,9 @@ def test_fill_holes_interpolates_a_coarse_plane_exactly():
 
 def test_geotiff_round_trip_keeps_all_bands_and_georeferencing(tmp_path):
     rng = np.random.default_rng(3)
-    xyz = np.column_stack([rng.uniform(0, 20, 3000), rng.uniform(0, 10, 3000),
-                           rng.normal(5, 1, 3000)])
+    xyz = np.column_stack(
+        [rng.uniform(0, 20, 3000), rng.uniform(0, 10, 3000), rng.normal(5, 1, 3000)]
+    )
     dem = Dem.from_points(xyz, 0.5)
     cgrid = GridSpec(-30.0, 40.0, 30.0, 3, 3)
     coarse = Dem(cgrid, np.full((3, 3), 5.0, np.float32))

@@ -1,0 +1,64 @@
+"""Data associator: global nearest neighbour with explicit missed detections.
+
+The assignment problem is augmented so that "missed" is a column like any other::
+
+                 measurements (M)        missed (T)
+    tracks (T)   [ d2 or forbidden  |  gate on diagonal ]
+    unused (M)   [ 0 on diagonal    |  0                ]
+
+and solved with :func:`scipy.optimize.linear_sum_assignment`. A track takes a
+measurement only when that is cheaper than missing (the gate) - never two tracks one
+measurement, never one track two.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from .protocols import Hypothesis, MissedDetection, SingleHypothesis
+
+__all__ = ["GlobalNearestNeighbour"]
+
+_FORBIDDEN = 1e18
+
+
+@dataclass(frozen=True)
+class GlobalNearestNeighbour:
+    """GNN associator.
+
+    Parameters
+    ----------
+    miss_cost : float
+        Cost of the missed-detection hypothesis (the squared gate).
+    """
+
+    miss_cost: float
+
+    def associate(
+        self, hypotheses: Sequence[Sequence[SingleHypothesis | None]], n_measurements: int
+    ) -> list[Hypothesis]:
+        """One hypothesis per track, minimising the total cost."""
+        n_tracks = len(hypotheses)
+        if n_tracks == 0:
+            return []
+        m = n_measurements
+        cost = np.full((n_tracks + m, m + n_tracks), _FORBIDDEN)
+        for i, row in enumerate(hypotheses):
+            for j, hyp in enumerate(row):
+                if hyp is not None:
+                    cost[i, j] = hyp.distance2
+            cost[i, m + i] = self.miss_cost
+        cost[n_tracks:, :m][np.diag_indices(m)] = 0.0
+        cost[n_tracks:, m:] = 0.0
+        rows, cols = linear_sum_assignment(cost)
+        out: list[Hypothesis] = [MissedDetection()] * n_tracks
+        for r, c in zip(rows, cols, strict=True):
+            if r < n_tracks and c < m and cost[r, c] < _FORBIDDEN:
+                hyp = hypotheses[r][c]
+                if hyp is not None:
+                    out[r] = hyp
+        return out

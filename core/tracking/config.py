@@ -1,0 +1,170 @@
+"""Tracker settings: one frozen value with per-class motion parameters.
+
+Every number has a unit in its name. Defaults suit ground vehicles and pedestrians seen
+at 5-30 Hz from masts tens of metres high, with hit uncertainties of a few decimetres.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+
+from ..errors import TrackingError
+
+__all__ = ["ClassParams", "TrackerConfig"]
+
+
+@dataclass(frozen=True)
+class ClassParams:
+    """Motion parameters of one object class.
+
+    Parameters
+    ----------
+    q_m2_s3 : float
+        Spectral density of the white-noise acceleration of the constant-velocity model
+        (m^2/s^3), per horizontal axis.
+    init_speed_sigma_m_s : float
+        1-sigma of each velocity component of a new track (m/s).
+    max_coast_s : float
+        A confirmed track with no associated fix for longer than this is deleted (s); below
+        it the track coasts on its motion model and keeps its identity.
+    """
+
+    q_m2_s3: float
+    init_speed_sigma_m_s: float
+    max_coast_s: float
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not (math.isfinite(value) and value > 0):
+                raise TrackingError(f"{f.name} must be a positive number, got {value}")
+
+
+def _default_classes() -> dict[str, ClassParams]:
+    return {
+        "vehicle": ClassParams(q_m2_s3=3.0, init_speed_sigma_m_s=10.0, max_coast_s=4.0),
+        "human": ClassParams(q_m2_s3=0.3, init_speed_sigma_m_s=1.5, max_coast_s=4.0),
+    }
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Settings shared by every tracking method.
+
+    Parameters
+    ----------
+    classes : dict of str to ClassParams
+        Motion parameters per class ("vehicle", "human").
+    gate_probability : float
+        Probability mass of the chi-square (2 dof) validation gate on the Mahalanobis
+        distance between a hit and a track's predicted position.
+    confirm_hits : int
+        M of the M-of-N rule: a tentative track is confirmed after this many fixes...
+    confirm_window_s : float
+        ...within this long after its first fix; otherwise it is dropped (s).
+    gap_threshold_s : float
+        A span with no associated fix longer than this is reported as a gap (s).
+    step_window_s : float
+        Fixes within this long of the first fix of a step are processed together, and
+        only those can be triangulated with each other (s).
+    fuse_sensors : bool
+        Triangulate simultaneous fixes of the same object from two sensors.
+    fusion_min_angle_deg : float
+        Rays meeting at a smaller angle are not triangulated (poor geometry).
+    fusion_max_miss_m : float
+        Rays whose common perpendicular is longer than this are not the same object.
+    fusion_hit_gate_sigma : float
+        The triangulated point must lie within this many hit sigmas (plus 1 m) of a hit of
+        each ray, horizontally, or the pair is a ghost.
+    ray_sigma_rad : float
+        1-sigma angular error of a viewing ray, used for the triangulated point's sigma.
+    raw_gate_m : float
+        Association radius of the raw (unfiltered) methods (m).
+    road_sigma_m : float or None
+        Sigma of a road-rule hit (m); None uses the smallest hit sigma of the fix.
+    clutter_density_per_m2 : float
+        Likelihood floor of the hit mixture: the density of a hit that is none of the
+        object's (a tree crown, a false alarm), per square metre.
+    n_particles : int
+        Particles per track of the multi-hypothesis (CONDENSATION) filter.
+    resample_ess_ratio : float
+        Resample when the effective sample size falls below this fraction of the
+        particles (1.0 = resample every update, as CONDENSATION does).
+    smoothing_lag : int
+        Track points up to this many updates old are re-estimated (Kalman: fixed-lag
+        Rauch-Tung-Striebel; particles: from their ancestry; raw methods: never), so a
+        point made while the hypotheses were still split is settled once motion has told
+        them apart. The newest point is always the filtered one (what a live display
+        shows).
+    mode_radius_m : float
+        The particle estimate is the mean of the particles within this radius of the
+        densest cell, so separate hypotheses are not averaged into a point between them.
+    road_motion : bool
+        Multi-hypothesis method only: move vehicle particles along the road network when
+        one is given.
+    seed : int
+        Seed of the particle filter's random generator.
+    """
+
+    classes: dict[str, ClassParams] = field(default_factory=_default_classes)
+    gate_probability: float = 0.9999
+    confirm_hits: int = 3
+    confirm_window_s: float = 1.0
+    gap_threshold_s: float = 1.0
+    step_window_s: float = 0.02
+    fuse_sensors: bool = True
+    fusion_min_angle_deg: float = 10.0
+    fusion_max_miss_m: float = 1.5
+    fusion_hit_gate_sigma: float = 4.0
+    ray_sigma_rad: float = 2e-3
+    raw_gate_m: float = 20.0
+    road_sigma_m: float | None = None
+    clutter_density_per_m2: float = 1e-4
+    n_particles: int = 400
+    resample_ess_ratio: float = 0.5
+    smoothing_lag: int = 5
+    mode_radius_m: float = 3.0
+    road_motion: bool = False
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("vehicle", "human"):
+            if name not in self.classes:
+                raise TrackingError(f"TrackerConfig.classes lacks parameters for {name!r}")
+        if not 0.0 < self.gate_probability < 1.0:
+            raise TrackingError(f"gate_probability must be in (0, 1), got {self.gate_probability}")
+        if self.confirm_hits < 1:
+            raise TrackingError(f"confirm_hits must be >= 1, got {self.confirm_hits}")
+        if self.smoothing_lag < 0:
+            raise TrackingError(f"smoothing_lag must be >= 0, got {self.smoothing_lag}")
+        if self.n_particles < 10:
+            raise TrackingError(f"n_particles must be >= 10, got {self.n_particles}")
+        if not 0.0 < self.resample_ess_ratio <= 1.0:
+            raise TrackingError("resample_ess_ratio must be in (0, 1]")
+        positive = (
+            "confirm_window_s",
+            "gap_threshold_s",
+            "fusion_min_angle_deg",
+            "fusion_max_miss_m",
+            "fusion_hit_gate_sigma",
+            "ray_sigma_rad",
+            "raw_gate_m",
+            "clutter_density_per_m2",
+            "mode_radius_m",
+        )
+        for name in positive:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise TrackingError(f"{name} must be a positive number, got {value}")
+        if not (math.isfinite(self.step_window_s) and self.step_window_s >= 0):
+            raise TrackingError(f"step_window_s must be >= 0, got {self.step_window_s}")
+        if self.road_sigma_m is not None and not self.road_sigma_m > 0:
+            raise TrackingError(f"road_sigma_m must be positive or None, got {self.road_sigma_m}")
+
+    def params(self, cls: str) -> ClassParams:
+        """Motion parameters of class ``cls``."""
+        try:
+            return self.classes[cls]
+        except KeyError:
+            raise TrackingError(f"no motion parameters for class {cls!r}") from None

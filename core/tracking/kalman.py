@@ -1,0 +1,176 @@
+"""Kalman filter on the constant-velocity state, with a hit-mixture (PDA) update.
+
+The state is Gaussian over ``[x, y, vx, vy]`` (local frame, m and m/s); the measurement
+is a hit's horizontal position with covariance ``sigma^2 I``. When the measurement model
+hands over several candidates as a mixture (no road hit, say), the update is the
+probabilistic data association one: each hit is weighed by its likelihood under the
+prediction against a clutter floor, and the weighted posteriors are merged by moment
+matching, so a tree-crown hit far from the prediction barely moves the track.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .protocols import Candidates, MotionModel
+
+__all__ = ["GaussianState", "KalmanFilter"]
+
+_H = np.hstack([np.eye(2), np.zeros((2, 2))])
+
+
+@dataclass(frozen=True, eq=False)
+class GaussianState:
+    """A Gaussian track state.
+
+    Parameters
+    ----------
+    t_s : float
+        Time of the state (s).
+    x : ndarray, shape (4,)
+        Mean ``[x, y, vx, vy]`` (m, m/s).
+    P : ndarray, shape (4, 4)
+        Covariance.
+    z_m : float
+        Height of the last hit used (m, local frame).
+    history : tuple of (float, ndarray, ndarray)
+        Filtered ``(t_s, x, P)`` at the last few measurement times (oldest first), for
+        the fixed-lag Rauch-Tung-Striebel smoother of :meth:`KalmanFilter.revise`.
+    """
+
+    t_s: float
+    x: np.ndarray
+    P: np.ndarray
+    z_m: float
+    history: tuple[tuple[float, np.ndarray, np.ndarray], ...] = ()
+
+
+def _kalman(x: np.ndarray, p: np.ndarray, z_xy: np.ndarray, sigma: float) -> tuple:
+    """One linear update; returns (x, P). Joseph form keeps P symmetric positive."""
+    r = sigma**2 * np.eye(2)
+    s = _H @ p @ _H.T + r
+    k = np.linalg.solve(s, _H @ p).T  # P H^T S^-1, S symmetric
+    x_new = x + k @ (z_xy - _H @ x)
+    ikh = np.eye(4) - k @ _H
+    p_new = ikh @ p @ ikh.T + k @ r @ k.T
+    return x_new, 0.5 * (p_new + p_new.T)
+
+
+@dataclass(frozen=True)
+class KalmanFilter:
+    """Predictor/updater for :class:`GaussianState`.
+
+    Parameters
+    ----------
+    motion : MotionModel
+        Linear-Gaussian motion model.
+    init_speed_sigma_m_s : float
+        1-sigma of each velocity component of a new track (m/s).
+    clutter_density_per_m2 : float
+        Density of hits that are not the object (PDA floor), 1/m^2.
+    history_len : int
+        Filtered states kept for :meth:`revise` (0: no smoothing).
+    """
+
+    motion: MotionModel
+    init_speed_sigma_m_s: float
+    clutter_density_per_m2: float = 1e-4
+    history_len: int = 0
+
+    def _remember(self, state: GaussianState) -> GaussianState:
+        if self.history_len <= 0:
+            return state
+        hist = (*state.history, (state.t_s, state.x, state.P))[-self.history_len :]
+        return replace(state, history=hist)
+
+    def initiate(
+        self, cands: Candidates, which: int | None, t_s: float, rng: np.random.Generator
+    ) -> GaussianState:
+        """Start at candidate ``which`` (None: the weighted spread of all), at rest."""
+        if which is None:
+            w = cands.weight
+            mean = w @ cands.z_enu
+            d = cands.z_enu[:, :2] - mean[:2]
+            var = float(w @ (cands.sigma_m**2 + 0.5 * np.sum(d * d, axis=1)))
+        else:
+            mean = cands.z_enu[which]
+            var = float(cands.sigma_m[which] ** 2)
+        x = np.array([mean[0], mean[1], 0.0, 0.0])
+        sv2 = self.init_speed_sigma_m_s**2
+        return self._remember(GaussianState(t_s, x, np.diag([var, var, sv2, sv2]), float(mean[2])))
+
+    def predict(self, state: GaussianState, t_s: float, rng: np.random.Generator) -> GaussianState:
+        """Predict to ``t_s`` (never backwards)."""
+        dt = max(0.0, t_s - state.t_s)
+        if dt == 0.0:
+            return state
+        f = self.motion.transition(dt)
+        p = f @ state.P @ f.T + self.motion.covariance(dt)
+        return GaussianState(t_s, f @ state.x, 0.5 * (p + p.T), state.z_m, state.history)
+
+    def gaussian(self, state: GaussianState) -> tuple[np.ndarray, np.ndarray]:
+        """Horizontal position mean (2,) and covariance (2, 2)."""
+        return state.x[:2].copy(), state.P[:2, :2].copy()
+
+    def update(
+        self, state: GaussianState, cands: Candidates, chosen: int, rng: np.random.Generator
+    ) -> GaussianState:
+        """Update with candidate ``chosen``, or with all of them (PDA) for a mixture."""
+        if not cands.mixture:
+            x, p = _kalman(state.x, state.P, cands.z_enu[chosen, :2], float(cands.sigma_m[chosen]))
+            out = GaussianState(state.t_s, x, p, float(cands.z_enu[chosen, 2]), state.history)
+        else:
+            out = self._pda(state, cands)
+        return self._remember(out)
+
+    def _pda(self, state: GaussianState, cands: Candidates) -> GaussianState:
+        m = cands.size
+        lik = np.empty(m)
+        xs = np.empty((m, 4))
+        ps = np.empty((m, 4, 4))
+        for j in range(m):
+            sigma = float(cands.sigma_m[j])
+            s = state.P[:2, :2] + sigma**2 * np.eye(2)
+            nu = cands.z_enu[j, :2] - state.x[:2]
+            d2 = float(nu @ np.linalg.solve(s, nu))
+            lik[j] = cands.weight[j] * np.exp(-0.5 * d2) / (2 * np.pi * np.sqrt(np.linalg.det(s)))
+            xs[j], ps[j] = _kalman(state.x, state.P, cands.z_enu[j, :2], sigma)
+        total = self.clutter_density_per_m2 + lik.sum()
+        beta = lik / total
+        beta0 = self.clutter_density_per_m2 / total
+        x = beta0 * state.x + beta @ xs
+        d0 = state.x - x
+        p = beta0 * (state.P + np.outer(d0, d0))
+        for j in range(m):
+            dj = xs[j] - x
+            p += beta[j] * (ps[j] + np.outer(dj, dj))
+        best = int(np.argmax(beta))
+        z = float(cands.z_enu[best, 2]) if beta[best] > beta0 else state.z_m
+        return GaussianState(state.t_s, x, 0.5 * (p + p.T), z, state.history)
+
+    def revise(self, state: GaussianState, n: int) -> list[np.ndarray]:
+        """Smooth the last ``n`` measurement times (fixed-lag Rauch-Tung-Striebel).
+
+        Returns horizontal positions (2,), oldest first; at most ``history_len`` of them
+        (none when smoothing is off). The newest equals the filtered estimate.
+        """
+        hist = state.history[-n:] if n > 0 else ()
+        if not hist:
+            return []
+        t_next, xs, _ = hist[-1]
+        out = [xs[:2].copy()]
+        for t_k, x_k, p_k in reversed(hist[:-1]):
+            dt = t_next - t_k
+            f = self.motion.transition(dt)
+            p_pred = f @ p_k @ f.T + self.motion.covariance(dt)
+            gain = np.linalg.solve(p_pred, f @ p_k).T  # P_k F^T P_pred^-1
+            xs = x_k + gain @ (xs - f @ x_k)
+            out.append(xs[:2].copy())
+            t_next = t_k
+        return out[::-1]
+
+    def estimate(self, state: GaussianState) -> tuple[np.ndarray, np.ndarray | None]:
+        """Position (3,) and horizontal covariance (2, 2)."""
+        return np.array([state.x[0], state.x[1], state.z_m]), state.P[:2, :2].copy()

@@ -1,0 +1,115 @@
+"""Constant-velocity motion in the horizontal plane of the local frame.
+
+State ``[x, y, vx, vy]`` (m, m/s). The acceleration is white noise of spectral density
+``q`` (m^2/s^3) per axis, which gives the familiar per-axis process noise::
+
+    Q_axis = q * [[dt^3/3, dt^2/2],
+                  [dt^2/2, dt    ]]
+
+Heights are not modelled: a track's ``z`` comes from the terrain hit it used.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import TrackingError
+from .protocols import Candidates
+
+__all__ = ["ConstantVelocity", "ConstantVelocityParticles", "allocate_counts"]
+
+
+@dataclass(frozen=True)
+class ConstantVelocity:
+    """Linear-Gaussian constant-velocity model (the Kalman filter's motion model).
+
+    Parameters
+    ----------
+    q_m2_s3 : float
+        Acceleration noise spectral density per axis (m^2/s^3).
+    """
+
+    q_m2_s3: float
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.q_m2_s3) and self.q_m2_s3 > 0):
+            raise TrackingError(f"q_m2_s3 must be positive, got {self.q_m2_s3}")
+
+    def transition(self, dt_s: float) -> np.ndarray:
+        """State transition matrix F, shape (4, 4)."""
+        f = np.eye(4)
+        f[0, 2] = f[1, 3] = dt_s
+        return f
+
+    def covariance(self, dt_s: float) -> np.ndarray:
+        """Process noise covariance Q, shape (4, 4)."""
+        q = self.q_m2_s3
+        axis = q * np.array([[dt_s**3 / 3.0, dt_s**2 / 2.0], [dt_s**2 / 2.0, dt_s]])
+        out = np.zeros((4, 4))
+        for k in (0, 1):  # x with vx, y with vy
+            idx = np.ix_([k, k + 2], [k, k + 2])
+            out[idx] = axis
+        return out
+
+
+def allocate_counts(weight: np.ndarray, n: int) -> np.ndarray:
+    """Split ``n`` items over ``weight`` (sums to 1) by largest remainders; shape (m,)."""
+    raw = np.asarray(weight, dtype=np.float64) * n
+    counts = np.floor(raw).astype(np.int64)
+    rest = n - int(counts.sum())
+    if rest > 0:
+        order = np.argsort(-(raw - counts), kind="stable")
+        counts[order[:rest]] += 1
+    return counts
+
+
+@dataclass(frozen=True)
+class ConstantVelocityParticles:
+    """Constant-velocity motion sampled for a particle set (array of shape (n, 4)).
+
+    Parameters
+    ----------
+    q_m2_s3 : float
+        Acceleration noise spectral density per axis (m^2/s^3).
+    init_speed_sigma_m_s : float
+        1-sigma of each velocity component of new particles (m/s).
+    """
+
+    q_m2_s3: float
+    init_speed_sigma_m_s: float
+
+    def initial(self, cands: Candidates, n: int, rng: np.random.Generator) -> np.ndarray:
+        """``n`` particles around the candidates in proportion to their weights."""
+        counts = allocate_counts(cands.weight, n)
+        centre = np.repeat(cands.z_enu[:, :2], counts, axis=0)
+        sigma = np.repeat(cands.sigma_m, counts)[:, None]
+        out = np.empty((n, 4))
+        out[:, :2] = centre + sigma * rng.standard_normal((n, 2))
+        out[:, 2:] = self.init_speed_sigma_m_s * rng.standard_normal((n, 2))
+        return out
+
+    def propagate(self, particles: np.ndarray, dt_s: float, rng: np.random.Generator) -> np.ndarray:
+        """Move the particles ``dt_s`` ahead; noise drawn from the exact discrete Q."""
+        if dt_s <= 0.0:
+            return particles
+        out = particles.copy()
+        out[:, :2] += dt_s * particles[:, 2:]
+        axis = self.q_m2_s3 * np.array([[dt_s**3 / 3.0, dt_s**2 / 2.0], [dt_s**2 / 2.0, dt_s]])
+        chol = np.linalg.cholesky(axis)
+        n = particles.shape[0]
+        for k in (0, 1):
+            noise = rng.standard_normal((n, 2)) @ chol.T
+            out[:, k] += noise[:, 0]
+            out[:, k + 2] += noise[:, 1]
+        return out
+
+    def positions(self, particles: np.ndarray) -> np.ndarray:
+        """Horizontal positions, shape (n, 2)."""
+        return particles[:, :2]
+
+    def take(self, particles: np.ndarray, index: np.ndarray) -> np.ndarray:
+        """Return the particles at ``index``."""
+        return particles[index]

@@ -1,0 +1,414 @@
+"""The multi-target, multi-sensor tracker assembled from components.
+
+Processing, per *step* (fixes within ``config.step_window_s`` of the step's first):
+
+1. optionally triangulate same-object pairs from two sensors (:mod:`.fusion`);
+2. split into *scans* of equal time and sensor, in time order; per scan:
+   a. predict every live track to the scan time;
+   b. confirmed tracks: hypothesise each (track, measurement) of the same class and let
+      the associator pick one hypothesis per track - a measurement or the explicit
+      missed detection - then update;
+   c. tentative tracks: the associator gives each group of siblings (seeds of one fix)
+      one measurement among those left; every sibling whose gate holds it updates
+      (siblings do not compete, so the right one of "crown or road" is not starved);
+   d. measurements nobody took seed tentative tracks (:mod:`.initiation`);
+   e. confirm tentative tracks (the best sibling of a group wins, the rest are dropped),
+      expire stale ones, end confirmed tracks that coasted too long (:mod:`.deletion`;
+      this is also checked before (a), so a track cannot take a fix after too long).
+
+The batch entry point feeds the same :class:`Tracker` one fix at a time, so incremental
+and batch use give identical tracks.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import TrackingError
+from .config import TrackerConfig
+from .fusion import fuse_measurements
+from .protocols import (
+    Candidates,
+    DataAssociator,
+    Deleter,
+    Filter,
+    Hypothesiser,
+    Initiator,
+    Measurement,
+    MeasurementModel,
+    SingleHypothesis,
+)
+from .types import Fix, Track, TrackPoint
+
+__all__ = ["ClassComponents", "Tracker", "TrackerComponents", "find_gaps"]
+
+
+@dataclass(frozen=True)
+class ClassComponents:
+    """What one object class is tracked with.
+
+    Parameters
+    ----------
+    measurement : MeasurementModel
+        Reads candidates out of a fix.
+    filter : Filter
+        Predictor/updater (its motion model carries the class's parameters).
+    initiator : Initiator
+        Seeds and confirms tentative tracks.
+    """
+
+    measurement: MeasurementModel
+    filter: Filter
+    initiator: Initiator
+
+
+@dataclass(frozen=True)
+class TrackerComponents:
+    """A tracker's parts.
+
+    Parameters
+    ----------
+    per_class : mapping of str to ClassComponents
+        Per object class ("vehicle", "human").
+    hypothesiser : Hypothesiser
+        Gating and cost.
+    associator : DataAssociator
+        Picks one hypothesis per confirmed track.
+    deleter : Deleter
+        Ends confirmed tracks.
+    fuse : bool
+        Triangulate same-object pairs from two sensors.
+    """
+
+    per_class: Mapping[str, ClassComponents]
+    hypothesiser: Hypothesiser
+    associator: DataAssociator
+    deleter: Deleter
+    fuse: bool = True
+
+
+@dataclass(eq=False)
+class _Record:
+    """Mutable bookkeeping of one live or ended track (internal)."""
+
+    uid: int
+    group: int
+    cls: str
+    state: Any
+    t_created: float
+    t_update: float
+    points: list[TrackPoint] = field(default_factory=list)
+    n_updates: int = 0
+    nis_sum: float = 0.0
+    track_id: int | None = None
+    #: Candidates behind the points that may still be revised (all while tentative, the
+    #: last ``smoothing_lag + 1`` once confirmed).
+    cands: list[Candidates] = field(default_factory=list)
+
+
+def _best(hyps: Sequence[SingleHypothesis | None]) -> SingleHypothesis | None:
+    """Return the gated hypothesis with the smallest distance (None if all are gated out)."""
+    real = [h for h in hyps if h is not None]
+    return min(real, key=lambda h: h.distance2) if real else None
+
+
+def find_gaps(t_s: np.ndarray, threshold_s: float) -> list[tuple[float, float]]:
+    """Intervals between consecutive times (sorted, (n,)) longer than ``threshold_s``."""
+    t = np.asarray(t_s, dtype=np.float64)
+    if t.size < 2:
+        return []
+    dt = np.diff(t)
+    return [(float(t[i]), float(t[i + 1])) for i in np.flatnonzero(dt > threshold_s)]
+
+
+class Tracker:
+    """Online tracker: feed fixes in time order, read tracks at any time.
+
+    Parameters
+    ----------
+    components : TrackerComponents
+        The assembled parts (see :mod:`.methods` for the named methods).
+    config : TrackerConfig
+        Settings (step window, fusion thresholds, gap threshold, seed).
+
+    Notes
+    -----
+    :meth:`update` buffers fixes until one arrives past the step window, so that fixes of
+    one instant from several cameras are fused; :meth:`step` processes a group at once.
+    :meth:`finish` (or :meth:`flush`) processes what is buffered.
+
+    The newest point of a track is the filtered estimate; the ``config.smoothing_lag``
+    points before it may still be revised by later fixes (fixed-lag smoothing), so a
+    live display should redraw a track's tail rather than only append to it. Ended
+    tracks are kept (for :meth:`tracks`); a long-running server should export and drop
+    them itself if memory matters.
+    """
+
+    def __init__(self, components: TrackerComponents, config: TrackerConfig) -> None:
+        self.components = components
+        self.config = config
+        self._rng = np.random.default_rng(config.seed)
+        self._live: list[_Record] = []
+        self._ended: list[_Record] = []
+        self._buffer: list[tuple[Fix, int]] = []
+        self._n_received = 0
+        self._t_done = -np.inf
+        self._next_uid = 0
+        self._next_group = 0
+        self._next_id = 1
+        #: Fixes that had no usable measurement (no hit), counted and skipped.
+        self.n_unusable = 0
+
+    # ----------------------------------------------------------------- feeding
+    def _index(self, index: int | None) -> int:
+        i = self._n_received if index is None else int(index)
+        self._n_received += 1
+        return i
+
+    def _check_time(self, fix: Fix) -> None:
+        if fix.t_s < self._t_done:
+            raise TrackingError(
+                f"fix at t={fix.t_s} s is older than fixes already processed (t={self._t_done} s)"
+            )
+        if fix.cls not in self.components.per_class:
+            raise TrackingError(f"no tracker components for class {fix.cls!r}")
+
+    def update(self, fix: Fix, index: int | None = None) -> None:
+        """Add one fix (buffered until the step window of the buffered ones closes).
+
+        Parameters
+        ----------
+        fix : Fix
+            The fix; times must not go back past processed steps.
+        index : int or None
+            Its index for :attr:`TrackPoint.fix_indices` (default: arrival order).
+        """
+        self._check_time(fix)
+        if self._buffer and fix.t_s - self._buffer[0][0].t_s > self.config.step_window_s:
+            self.flush()
+        self._buffer.append((fix, self._index(index)))
+
+    def step(self, fixes: Sequence[Fix], indices: Sequence[int] | None = None) -> None:
+        """Process ``fixes`` (one instant, any sensors) now, after anything buffered."""
+        self.flush()
+        if indices is not None and len(indices) != len(fixes):
+            raise TrackingError("indices must match fixes one to one")
+        group = []
+        for k, fix in enumerate(fixes):
+            self._check_time(fix)
+            group.append((fix, self._index(None if indices is None else indices[k])))
+        if group:
+            self._process(group)
+
+    def flush(self) -> None:
+        """Process the buffered fixes."""
+        if self._buffer:
+            group, self._buffer = self._buffer, []
+            self._process(group)
+
+    def finish(self) -> list[Track]:
+        """Flush and return every confirmed track (ended ones included)."""
+        self.flush()
+        return self.tracks()
+
+    # ----------------------------------------------------------------- reading
+    def _to_track(self, rec: _Record) -> Track:
+        points = tuple(rec.points)
+        sensors = frozenset(s for p in points for s in p.sensors)
+        gaps = find_gaps(np.array([p.t_s for p in points]), self.config.gap_threshold_s)
+        if rec.track_id is None:
+            raise TrackingError("internal: a tentative track cannot be exported")
+        return Track(rec.track_id, rec.cls, points, sensors, tuple(gaps))  # type: ignore[arg-type]
+
+    def tracks(self, *, include_ended: bool = True) -> list[Track]:
+        """Return the confirmed tracks as values, by id (buffered fixes not yet included)."""
+        recs = [r for r in self._live if r.track_id is not None]
+        if include_ended:
+            recs += self._ended
+        return [self._to_track(r) for r in sorted(recs, key=lambda r: r.track_id or 0)]
+
+    def predicted_positions(self, t_s: float) -> dict[int, np.ndarray]:
+        """Live confirmed tracks' horizontal means predicted to ``t_s``: id -> (2,)."""
+        out = {}
+        for rec in self._live:
+            if rec.track_id is None:
+                continue
+            flt = self.components.per_class[rec.cls].filter
+            state = flt.predict(rec.state, t_s, np.random.default_rng(0))
+            out[rec.track_id] = flt.gaussian(state)[0]
+        return out
+
+    # -------------------------------------------------------------- processing
+    def _process(self, group: list[tuple[Fix, int]]) -> None:
+        meas = [Measurement(f, (i,), (f.sensor,)) for f, i in group]
+        if self.components.fuse and self.config.fuse_sensors and len(meas) > 1:
+            meas = fuse_measurements(meas, self.config)
+        scans: dict[tuple[float, str], list[Measurement]] = {}
+        for m in meas:
+            scans.setdefault((m.t_s, m.fix.sensor), []).append(m)
+        for key in sorted(scans):
+            self._scan(key[0], scans[key])
+        self._t_done = max(self._t_done, max(f.t_s for f, _ in group))
+
+    def _candidates(self, meas: Iterable[Measurement]) -> list[tuple[Measurement, Candidates]]:
+        out = []
+        for m in meas:
+            cands = self.components.per_class[m.cls].measurement.candidates(m.fix)
+            if cands is None:
+                self.n_unusable += 1
+            else:
+                out.append((m, cands))
+        return out
+
+    def _hypothesise(
+        self, rec: _Record, items: Sequence[tuple[Measurement, Candidates]], allowed: Sequence[bool]
+    ) -> list[SingleHypothesis | None]:
+        flt = self.components.per_class[rec.cls].filter
+        mean, cov = flt.gaussian(rec.state)
+        row: list[SingleHypothesis | None] = []
+        for j, (m, cands) in enumerate(items):
+            if not allowed[j] or m.cls != rec.cls:
+                row.append(None)
+            else:
+                row.append(self.components.hypothesiser.hypothesise(mean, cov, cands, j))
+        return row
+
+    def _apply(
+        self, rec: _Record, t: float, m: Measurement, cands: Candidates, hyp: SingleHypothesis
+    ) -> None:
+        flt = self.components.per_class[rec.cls].filter
+        rec.state = flt.update(rec.state, cands, hyp.candidate_index, self._rng)
+        rec.n_updates += 1
+        rec.nis_sum += hyp.distance2
+        rec.t_update = t
+        p, cov = flt.estimate(rec.state)
+        rec.points.append(TrackPoint(t, p, m.sensors, m.indices, cov))
+        rec.cands.append(cands)
+        if rec.track_id is not None:
+            lag = self.config.smoothing_lag
+            self._revise(rec, min(lag + 1, len(rec.cands)))
+            del rec.cands[: -(lag + 1)]
+
+    def _scan(self, t: float, meas: list[Measurement]) -> None:
+        items = self._candidates(meas)
+        # End what coasted too long before it can take a fix: identity is not kept
+        # across an absence longer than the limit, however wide the gate has grown.
+        self._confirm_and_delete(t)
+        for rec in self._live:
+            flt = self.components.per_class[rec.cls].filter
+            rec.state = flt.predict(rec.state, t, self._rng)
+        taken = [False] * len(items)
+
+        confirmed = [r for r in self._live if r.track_id is not None]
+        if confirmed and items:
+            allowed = [True] * len(items)
+            rows = [self._hypothesise(r, items, allowed) for r in confirmed]
+            for rec, hyp in zip(
+                confirmed, self.components.associator.associate(rows, len(items)), strict=True
+            ):
+                if isinstance(hyp, SingleHypothesis):
+                    m, cands = items[hyp.measurement_index]
+                    self._apply(rec, t, m, cands, hyp)
+                    taken[hyp.measurement_index] = True
+
+        # Tentative tracks compete group against group (so a false alarm's seed cannot
+        # feed on a real object's fixes beside that object's own seed), but siblings of
+        # one group share: each sibling in whose gate the group's measurement lies takes it.
+        free = [not k for k in taken]
+        groups: dict[int, list[_Record]] = {}
+        for rec in self._live:
+            if rec.track_id is None:
+                groups.setdefault(rec.group, []).append(rec)
+        if groups and any(free):
+            keys = sorted(groups)
+            sib_rows = {g: [self._hypothesise(r, items, free) for r in groups[g]] for g in keys}
+            group_rows = [
+                [_best([row[j] for row in sib_rows[g]]) for j in range(len(items))] for g in keys
+            ]
+            choice = self.components.associator.associate(group_rows, len(items))
+            for g, hyp in zip(keys, choice, strict=True):
+                if not isinstance(hyp, SingleHypothesis):
+                    continue
+                j = hyp.measurement_index
+                m, cands = items[j]
+                for rec, row in zip(groups[g], sib_rows[g], strict=True):
+                    own = row[j]
+                    if own is not None:
+                        self._apply(rec, t, m, cands, own)
+                taken[j] = True
+
+        for j, (m, cands) in enumerate(items):
+            if not taken[j]:
+                self._seed(t, m, cands)
+        self._confirm_and_delete(t)
+
+    def _seed(self, t: float, m: Measurement, cands: Candidates) -> None:
+        parts = self.components.per_class[m.cls]
+        group = self._next_group
+        self._next_group += 1
+        for which in parts.initiator.seeds(cands):
+            state = parts.filter.initiate(cands, which, t, self._rng)
+            rec = _Record(self._next_uid, group, m.cls, state, t, t)
+            self._next_uid += 1
+            p, cov = parts.filter.estimate(state)
+            rec.points.append(TrackPoint(t, p, m.sensors, m.indices, cov))
+            rec.cands.append(cands)
+            rec.n_updates = 1
+            self._live.append(rec)
+
+    def _revise(self, rec: _Record, n: int) -> None:
+        """Let the filter re-estimate the last ``n`` points (fixed-lag smoothing).
+
+        ``z`` of a revised point is that of its fix's candidate nearest the new position.
+        """
+        flt = self.components.per_class[rec.cls].filter
+        revised = flt.revise(rec.state, n)
+        first = len(rec.points) - len(revised)
+        offset = len(rec.cands) - len(rec.points)
+        for k, xy in enumerate(revised, start=first):
+            old, cands = rec.points[k], rec.cands[k + offset]
+            near = int(np.argmin(np.sum((cands.z_enu[:, :2] - xy) ** 2, axis=1)))
+            p = np.array([xy[0], xy[1], cands.z_enu[near, 2]])
+            rec.points[k] = TrackPoint(old.t_s, p, old.sensors, old.fix_indices, old.cov_xy)
+
+    def _confirm(self, rec: _Record) -> None:
+        """Give ``rec`` an id and let its filter revise the points made while tentative."""
+        rec.track_id = self._next_id
+        self._next_id += 1
+        self._revise(rec, len(rec.points))
+        del rec.cands[: -(self.config.smoothing_lag + 1)]
+
+    def _confirm_and_delete(self, t: float) -> None:
+        per_class = self.components.per_class
+        winners: dict[int, _Record] = {}
+        for rec in self._live:
+            if rec.track_id is not None:
+                continue
+            if per_class[rec.cls].initiator.confirmed(rec.n_updates, t - rec.t_created):
+                best = winners.get(rec.group)
+                key = (-rec.n_updates, rec.nis_sum / max(rec.n_updates - 1, 1), rec.uid)
+                if best is None or key < (
+                    -best.n_updates,
+                    best.nis_sum / max(best.n_updates - 1, 1),
+                    best.uid,
+                ):
+                    winners[rec.group] = rec
+        for group in sorted(winners, key=lambda g: winners[g].uid):
+            self._confirm(winners[group])
+        keep: list[_Record] = []
+        for rec in self._live:
+            if rec.track_id is None:
+                if rec.group in winners:
+                    continue  # a sibling won
+                if per_class[rec.cls].initiator.expired(rec.n_updates, t - rec.t_created):
+                    continue
+                keep.append(rec)
+            elif self.components.deleter.delete(rec.cls, t - rec.t_update):
+                self._ended.append(rec)
+            else:
+                keep.append(rec)
+        self._live = keep

@@ -1,0 +1,301 @@
+"""Value types of the tracking library: detections, ray fixes, track points, tracks.
+
+Frames and units follow ``docs/conventions.md``: positions are in the local site frame
+("ENU": x east, y north, z up, metres), times are seconds (``t_s``) since the start of the
+session, pixels are ``(u, v)`` = (column, row) with ``(0, 0)`` the centre of the top-left
+pixel.
+
+The geolocation stage turns a :class:`Detection` into a :class:`Fix` (the viewing ray of
+the box's foot pixel and every place it meets the terrain); the trackers turn fixes into
+:class:`Track` values. Nothing here knows about cameras or DEM files.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from ..errors import DetectionError, TrackingError
+
+__all__ = [
+    "CLASSES",
+    "Detection",
+    "Fix",
+    "ObjectClass",
+    "Track",
+    "TrackPoint",
+    "TruthPath",
+]
+
+ObjectClass = Literal["vehicle", "human"]
+#: The object classes the trackers know, in a fixed order.
+CLASSES: tuple[str, ...] = ("vehicle", "human")
+
+
+def _frozen_array(
+    value: object, shape: tuple[int | None, ...], name: str, exc: type[Exception]
+) -> np.ndarray:
+    """Return ``value`` as a read-only float64 array of ``shape`` (None = any length)."""
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise exc(f"{name} must be numeric, got {value!r}") from err
+    if arr.ndim != len(shape) or any(
+        want is not None and have != want for have, want in zip(arr.shape, shape, strict=True)
+    ):
+        raise exc(f"{name} must have shape {shape}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise exc(f"{name} must be finite")
+    arr.setflags(write=False)
+    return arr
+
+
+@dataclass(frozen=True)
+class Detection:
+    """One detector output: a class-labelled image box from one sensor at one time.
+
+    Parameters
+    ----------
+    t_s : float
+        Capture time (s).
+    sensor : str
+        Sensor (camera) id.
+    bbox : tuple of 4 float
+        ``(u_min, v_min, u_max, v_max)`` in pixels, ``u_min <= u_max``, ``v_min <= v_max``.
+    cls : {"vehicle", "human"}
+        Object class.
+    score : float or None
+        Detector confidence, if any.
+    local_id : str or None
+        The detector's or a 2D tracker's own id for the object, if any (not trusted).
+    """
+
+    t_s: float
+    sensor: str
+    bbox: tuple[float, float, float, float]
+    cls: ObjectClass
+    score: float | None = None
+    local_id: str | None = None
+
+    def __post_init__(self) -> None:
+        if not math.isfinite(float(self.t_s)):
+            raise DetectionError(f"detection time must be finite, got {self.t_s}")
+        if not isinstance(self.sensor, str) or not self.sensor:
+            raise DetectionError("detection sensor must be a non-empty string")
+        if self.cls not in CLASSES:
+            raise DetectionError(f"detection class must be one of {CLASSES}, got {self.cls!r}")
+        if len(self.bbox) != 4:
+            raise DetectionError(f"bbox must have 4 numbers, got {self.bbox!r}")
+        box = tuple(float(b) for b in self.bbox)
+        if not all(math.isfinite(b) for b in box):
+            raise DetectionError(f"bbox must be finite, got {self.bbox!r}")
+        if box[0] > box[2] or box[1] > box[3]:
+            raise DetectionError(f"bbox must have u_min <= u_max and v_min <= v_max: {box}")
+        if self.score is not None and not math.isfinite(float(self.score)):
+            raise DetectionError(f"score must be finite or None, got {self.score}")
+        object.__setattr__(self, "t_s", float(self.t_s))
+        object.__setattr__(self, "bbox", box)
+        if self.score is not None:
+            object.__setattr__(self, "score", float(self.score))
+
+    @property
+    def foot_pixel(self) -> tuple[float, float]:
+        """Bottom-centre of the box ``(u, v)`` (px): where the object meets the ground."""
+        u_min, _, u_max, v_max = self.bbox
+        return ((u_min + u_max) / 2.0, v_max)
+
+
+@dataclass(frozen=True, eq=False)
+class Fix:
+    """A single-frame geolocation: one detection's viewing ray and its terrain hits.
+
+    Parameters
+    ----------
+    t_s : float
+        Time (s).
+    sensor : str
+        Sensor id (for a fused two-camera fix, ``"a+b"``).
+    cls : {"vehicle", "human"}
+        Object class.
+    detection_index : int
+        Index of the source detection in the caller's detection list.
+    origin_enu : array_like, shape (3,)
+        Ray origin (camera centre), local frame, m.
+    direction_enu : array_like, shape (3,)
+        Ray direction, local frame; normalised here.
+    hits_enu : array_like, shape (k, 3)
+        Every terrain hit of the ray, nearest first; ``k`` may be 0.
+    hit_sigma_m : array_like, shape (k,)
+        1-sigma horizontal uncertainty of each hit (m, > 0).
+    road_hit_enu : array_like, shape (3,), or None
+        The road rule's answer (the point of the ray on the road network), if any.
+    score : float or None
+        Detector confidence, copied from the detection.
+    """
+
+    t_s: float
+    sensor: str
+    cls: ObjectClass
+    detection_index: int
+    origin_enu: np.ndarray
+    direction_enu: np.ndarray
+    hits_enu: np.ndarray
+    hit_sigma_m: np.ndarray
+    road_hit_enu: np.ndarray | None = None
+    score: float | None = None
+
+    def __post_init__(self) -> None:
+        if not math.isfinite(float(self.t_s)):
+            raise TrackingError(f"fix time must be finite, got {self.t_s}")
+        if self.cls not in CLASSES:
+            raise TrackingError(f"fix class must be one of {CLASSES}, got {self.cls!r}")
+        object.__setattr__(self, "t_s", float(self.t_s))
+        object.__setattr__(self, "detection_index", int(self.detection_index))
+        err = TrackingError
+        origin = _frozen_array(self.origin_enu, (3,), "origin_enu", err)
+        direction = np.array(_frozen_array(self.direction_enu, (3,), "direction_enu", err))
+        norm = float(np.linalg.norm(direction))
+        if norm == 0.0:
+            raise TrackingError("direction_enu must be non-zero")
+        direction /= norm
+        direction.setflags(write=False)
+        hits = np.asarray(self.hits_enu, dtype=np.float64)
+        if hits.size == 0:
+            hits = np.zeros((0, 3))
+        hits = _frozen_array(hits, (None, 3), "hits_enu", err)
+        sigma = _frozen_array(np.atleast_1d(self.hit_sigma_m), (hits.shape[0],), "hit_sigma_m", err)
+        if np.any(sigma <= 0):
+            raise TrackingError("hit_sigma_m must be positive")
+        road = None
+        if self.road_hit_enu is not None:
+            road = _frozen_array(self.road_hit_enu, (3,), "road_hit_enu", err)
+        object.__setattr__(self, "origin_enu", origin)
+        object.__setattr__(self, "direction_enu", direction)
+        object.__setattr__(self, "hits_enu", hits)
+        object.__setattr__(self, "hit_sigma_m", sigma)
+        object.__setattr__(self, "road_hit_enu", road)
+
+    @property
+    def n_hits(self) -> int:
+        """Number of terrain hits ``k``."""
+        return int(self.hits_enu.shape[0])
+
+
+@dataclass(frozen=True, eq=False)
+class TrackPoint:
+    """One estimate of a track, made when fixes were associated to it.
+
+    Parameters
+    ----------
+    t_s : float
+        Time (s).
+    p_enu : ndarray, shape (3,)
+        Estimated position, local frame (m); ``z`` comes from the hit used.
+    sensors : tuple of str
+        Sensors whose fixes made this point.
+    fix_indices : tuple of int
+        Indices of those fixes in the order the tracker received them (``run_tracker``:
+        positions in its ``fixes`` argument).
+    cov_xy : ndarray, shape (2, 2), or None
+        Horizontal covariance of the estimate (m^2), when the method has one.
+    """
+
+    t_s: float
+    p_enu: np.ndarray
+    sensors: tuple[str, ...]
+    fix_indices: tuple[int, ...]
+    cov_xy: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "t_s", float(self.t_s))
+        object.__setattr__(self, "p_enu", _frozen_array(self.p_enu, (3,), "p_enu", TrackingError))
+        if self.cov_xy is not None:
+            cov = _frozen_array(self.cov_xy, (2, 2), "cov_xy", TrackingError)
+            object.__setattr__(self, "cov_xy", cov)
+        object.__setattr__(self, "sensors", tuple(self.sensors))
+        object.__setattr__(self, "fix_indices", tuple(int(i) for i in self.fix_indices))
+
+
+@dataclass(frozen=True, eq=False)
+class Track:
+    """A confirmed track: one identity over time.
+
+    Parameters
+    ----------
+    id : int
+        Track id (>= 1, in order of confirmation).
+    cls : {"vehicle", "human"}
+        Object class.
+    points : tuple of TrackPoint
+        Estimates in time order.
+    sensors : frozenset of str
+        Every sensor that contributed.
+    gaps : tuple of (float, float)
+        ``(t_start, t_end)`` intervals longer than the gap threshold with no associated fix:
+        nothing saw the object there, and the track says so instead of drawing through.
+    """
+
+    id: int
+    cls: ObjectClass
+    points: tuple[TrackPoint, ...]
+    sensors: frozenset[str] = field(default_factory=frozenset)
+    gaps: tuple[tuple[float, float], ...] = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "points", tuple(self.points))
+        object.__setattr__(self, "sensors", frozenset(self.sensors))
+        object.__setattr__(self, "gaps", tuple((float(a), float(b)) for a, b in self.gaps))
+
+    @property
+    def t_s(self) -> np.ndarray:
+        """Point times, shape (n,) (s)."""
+        return np.array([p.t_s for p in self.points], dtype=np.float64)
+
+    @property
+    def p_enu(self) -> np.ndarray:
+        """Point positions, shape (n, 3), local frame (m)."""
+        if not self.points:
+            return np.zeros((0, 3))
+        return np.stack([p.p_enu for p in self.points])
+
+
+@dataclass(frozen=True, eq=False)
+class TruthPath:
+    """The true path of one target (for metrics and synthetic scenarios).
+
+    Parameters
+    ----------
+    target_id : int
+        Target id.
+    cls : {"vehicle", "human"}
+        Object class.
+    t_s : array_like, shape (n,)
+        Strictly increasing times (s).
+    p_enu : array_like, shape (n, 3)
+        True positions, local frame (m); linear in between samples.
+    """
+
+    target_id: int
+    cls: ObjectClass
+    t_s: np.ndarray
+    p_enu: np.ndarray
+
+    def __post_init__(self) -> None:
+        t = _frozen_array(np.atleast_1d(self.t_s), (None,), "t_s", TrackingError)
+        p = _frozen_array(self.p_enu, (t.shape[0], 3), "p_enu", TrackingError)
+        if t.shape[0] < 1 or np.any(np.diff(t) <= 0):
+            raise TrackingError("truth times must be non-empty and strictly increasing")
+        object.__setattr__(self, "t_s", t)
+        object.__setattr__(self, "p_enu", p)
+
+    def at(self, t_s: float | Sequence[float] | np.ndarray) -> np.ndarray:
+        """Interpolate the true position at ``t_s`` (shape (m,) -> (m, 3)); NaN outside."""
+        t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
+        out = np.stack([np.interp(t, self.t_s, self.p_enu[:, j]) for j in range(3)], axis=-1)
+        outside = (t < self.t_s[0]) | (t > self.t_s[-1])
+        out[outside] = np.nan
+        return out

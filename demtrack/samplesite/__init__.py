@@ -1,0 +1,1 @@
+"""The Bushy-Run-like sample site: a deterministic synthetic world and its generator."""
