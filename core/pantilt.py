@@ -136,9 +136,10 @@ class YawCalibration:
         ``wrap(yaw_i - yaw_deg)``: how far clockwise of the calibrated pointing direction
         each landmark lies when the head reads ``pan_i``.
     rms_deg : float
-        Root mean square of the residuals.
+        Root mean square of the residuals of the landmarks used for the yaw.
     outliers : ndarray of bool, shape (k,)
-        Residuals larger than the threshold in magnitude; flagged, never dropped.
+        Residuals larger than the threshold in magnitude; always reported, and left out
+        of the yaw when calibrating with ``reject_outliers``.
     outlier_threshold_deg : float
         The threshold used.
     warnings : tuple of str
@@ -162,6 +163,7 @@ def calibrate_mount_yaw(
     pans_deg: ArrayLike,
     outlier_threshold_deg: float = 1.0,
     names: list[str] | None = None,
+    reject_outliers: bool = True,
 ) -> YawCalibration:
     """Estimate a pan-tilt head's mount yaw from centred landmarks.
 
@@ -177,6 +179,10 @@ def calibrate_mount_yaw(
         Residual magnitude above which a landmark is flagged as an outlier.
     names : list of str, optional
         Landmark labels for the warnings.
+    reject_outliers : bool
+        Re-estimate the yaw from the landmarks within the threshold (repeated until the
+        flagged set is stable, keeping at least two). False gives the paper's plain
+        circular mean over every sighting.
 
     Returns
     -------
@@ -230,8 +236,22 @@ def calibrate_mount_yaw(
         )
     yaw = float(wrap_deg(math.degrees(math.atan2(s, c))))
     resid = wrap_deg(yaws - yaw)
-    rms = float(np.sqrt(np.mean(resid**2)))
     outliers = np.abs(resid) > outlier_threshold_deg
+    # A blunder drags the circular mean by (blunder / k); re-estimate from the inliers
+    # until the flagged set stops changing (at least two inliers must remain).
+    for _ in range(k if reject_outliers else 0):
+        inl = ~outliers
+        if inl.sum() < 2 or inl.all():
+            break
+        rad = np.radians(yaws[inl])
+        yaw = float(wrap_deg(math.degrees(math.atan2(np.sin(rad).sum(), np.cos(rad).sum()))))
+        resid = wrap_deg(yaws - yaw)
+        flagged = np.abs(resid) > outlier_threshold_deg
+        if np.array_equal(flagged, outliers):
+            break
+        outliers = flagged
+    used = ~outliers if reject_outliers and (~outliers).sum() >= 2 else np.ones(k, bool)
+    rms = float(np.sqrt(np.mean(resid[used] ** 2)))
 
     notes: list[str] = []
     if k == 1:
@@ -240,6 +260,7 @@ def calibrate_mount_yaw(
         notes.append(
             f"landmark {labels[i]}: residual {resid[i]:+.3f} deg exceeds "
             f"{outlier_threshold_deg:g} deg (wrong pan reading or survey?)"
+            + ("; excluded from the yaw" if not used[i] else "")
         )
     for arr in (yaws, bearings, dist, resid, outliers):
         arr.setflags(write=False)
@@ -325,7 +346,9 @@ class PanTiltHead:
             0.0,
         )
 
-    def calibrate(self, outlier_threshold_deg: float = 1.0) -> YawCalibration:
+    def calibrate(
+        self, outlier_threshold_deg: float = 1.0, reject_outliers: bool = True
+    ) -> YawCalibration:
         """Run :func:`calibrate_mount_yaw` on the stored landmark readings."""
         if not self.landmarks:
             raise CalibrationError("this head has no landmark readings to calibrate from")
@@ -335,6 +358,7 @@ class PanTiltHead:
             [r.pan_deg for r in self.landmarks],
             outlier_threshold_deg,
             names=[r.name for r in self.landmarks],
+            reject_outliers=reject_outliers,
         )
 
     def with_mount_yaw(self, mount_yaw_deg: float) -> PanTiltHead:

@@ -66,23 +66,42 @@ class RoadNetwork:
         for i, line in enumerate(lines):
             if not isinstance(line, LineString) or line.is_empty or len(line.coords) < 2:
                 raise InputFileError(f"road {i} is not a line with at least two points")
+            if not np.isfinite(shapely.get_coordinates(line)).all():
+                raise InputFileError(f"road {i} has non-finite coordinates")
+        names = tuple(self.names) or tuple(f"road {i}" for i in range(len(lines)))
+        widths = tuple(float(w) for w in self.widths_m) or (6.0,) * len(lines)
+        if len(names) != len(lines):
+            raise InputFileError(f"{len(names)} road names given for {len(lines)} roads")
+        if len(widths) != len(lines):
+            raise InputFileError(f"{len(widths)} road widths given for {len(lines)} roads")
         object.__setattr__(self, "lines", lines)
-        object.__setattr__(
-            self, "names", tuple(self.names) or tuple(f"road {i}" for i in range(len(lines)))
-        )
-        object.__setattr__(self, "widths_m", tuple(self.widths_m) or (6.0,) * len(lines))
+        object.__setattr__(self, "names", names)
+        object.__setattr__(self, "widths_m", widths)
         object.__setattr__(self, "_tree", STRtree(lines))
 
     @classmethod
     def from_coordinates(
         cls, coords: Sequence[np.ndarray], names: Sequence[str] = (), widths_m: Sequence[float] = ()
     ) -> RoadNetwork:
-        """Build from arrays of ``(k, 2)`` site-frame vertices."""
-        return cls(
-            tuple(LineString(np.asarray(c, dtype=np.float64)[:, :2]) for c in coords),
-            tuple(names),
-            tuple(widths_m),
-        )
+        """Build from arrays of ``(k, 2)`` (or ``(k, 3)``, z dropped) site-frame vertices.
+
+        Raises
+        ------
+        InputFileError
+            If a vertex array is not ``(k >= 2, 2 or 3)`` of finite numbers.
+        """
+        lines = []
+        for i, c in enumerate(coords):
+            # Checked here: shapely would fail with a GEOS message on one vertex.
+            xy = np.asarray(c, dtype=np.float64)
+            if xy.ndim != 2 or xy.shape[0] < 2 or xy.shape[1] not in (2, 3):
+                raise InputFileError(
+                    f"road {i}: vertices must have shape (k >= 2, 2 or 3), got {xy.shape}"
+                )
+            if not np.isfinite(xy[:, :2]).all():
+                raise InputFileError(f"road {i} has non-finite coordinates")
+            lines.append(LineString(xy[:, :2]))
+        return cls(tuple(lines), tuple(names), tuple(widths_m))
 
     def __len__(self) -> int:
         return len(self.lines)
@@ -133,12 +152,14 @@ class RoadNetwork:
     def best_candidate(
         self, origin_enu: np.ndarray, direction_enu: np.ndarray, dem, cutoff_m: float
     ) -> RoadCandidate | None:
-        """The paper's road rule: the crossing with the smallest vertical gap."""
+        """Apply the paper's road rule: return the crossing with the smallest vertical gap."""
         cands = self.ray_candidates(origin_enu, direction_enu, dem, cutoff_m)
         return min(cands, key=lambda c: c.vertical_gap_m) if cands else None
 
     def distance_m(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Horizontal distance (m) from each point to the nearest road centre line."""
         pts = shapely.points(np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64))
+        if not self.lines:  # an empty tree's nearest() returns nothing, not one per point
+            return np.full(np.shape(pts), np.inf)
         nearest = self._tree.nearest(pts)
         return shapely.distance(pts, np.asarray(self.lines, dtype=object)[nearest])

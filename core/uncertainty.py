@@ -2,12 +2,13 @@
 
 A hit is the root of ``f(lam) = o_z + lam d_z - S(o_xy + lam d_xy)``, where ``S`` is the
 terrain surface. Perturbing the surface by ``dS`` moves the root by ``dS / f'``; turning
-the ray by a small angle ``dth`` about an axis perpendicular to it moves the point at range
-``lam`` by ``lam e dth`` and the root by ``-lam dth (e_z - g . e_xy) / f'``, where
-``f' = d_z - g . d_xy`` and ``g`` is the surface gradient. These linearised displacements
-are summed as independent 1-sigma contributions into a horizontal covariance. The result
-grows without bound as the ray grazes the terrain (``f' -> 0``), which is exactly when a
-small error in the pointing becomes a large error on the ground.
+the ray by a small angle ``dth`` towards a unit direction ``e`` perpendicular to it moves
+the point at range ``lam`` by ``lam e dth`` and the root by
+``-lam dth (e_z - g . e_xy) / f'``, where ``f' = d_z - g . d_xy`` and ``g`` is the surface
+gradient. These linearised displacements are summed as independent 1-sigma
+contributions into a horizontal covariance. The result grows without bound as the ray
+grazes the terrain (``f' -> 0``), which is exactly when a small error in the pointing
+becomes a large error on the ground.
 """
 
 from __future__ import annotations
@@ -36,8 +37,9 @@ def hit_covariance(
     gradient : ndarray, shape (k, 2)
         Terrain slope ``(dz/dx, dz/dy)`` at each hit.
     perturb_axes_enu : ndarray, shape (a, 3)
-        Unit axes, perpendicular to the ray, about which the pointing may err (the
-        camera's x and y axes for pixel noise).
+        Unit directions, perpendicular to the ray, towards which the pointing may err
+        (the ray ``d`` tips to ``d + dth e``; for pixel noise, the directions in which the
+        ray moves as the pixel's column and row change).
     perturb_sigmas_rad : ndarray, shape (a,)
         1-sigma angular error along each axis (rad).
     sigma_z_m : ndarray, shape (k,)

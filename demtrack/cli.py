@@ -1,5 +1,58 @@
-"""Command-line entry point."""
+"""Command-line entry point: ``demtrack <command> ...``.
+
+Each command lives in its own module under :mod:`demtrack.commands` and exposes
+``register(subparsers)``, which adds its parser and sets ``func``. User mistakes
+(:class:`~demtrack.core.errors.DemtrackError`, missing files) end in one line on stderr
+and exit status 2; nothing prints a traceback for them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from demtrack.commands import COMMANDS
+from demtrack.core.errors import DemtrackError
+
+__all__ = ["build_parser", "console_main", "main"]
+
+EXIT_USER_ERROR = 2
 
 
-def main() -> None:
-    print("hi")
+def build_parser() -> argparse.ArgumentParser:
+    """The full argument parser with every command registered."""
+    parser = argparse.ArgumentParser(
+        prog="demtrack",
+        description="Geolocate and track people and vehicles from calibrated cameras and a DEM.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for module in COMMANDS:
+        module.register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run one command; returns the process exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except DemtrackError as exc:
+        print(f"demtrack {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except (FileNotFoundError, IsADirectoryError, PermissionError) as exc:
+        print(f"demtrack {args.command}: error: {exc.strerror}: {exc.filename}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except KeyboardInterrupt:
+        print(f"demtrack {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+def console_main() -> None:
+    """Console-script entry: exit with :func:`main`'s status."""
+    sys.exit(main())
+
+
+if __name__ == "__main__":
+    console_main()

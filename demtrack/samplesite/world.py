@@ -47,7 +47,7 @@ class Building:
 
 @dataclass(frozen=True)
 class Tree:
-    """A tree crown: a paraboloid cap of radius ``r_m`` from ``base_m`` to ``top_m`` above ground."""
+    """A tree crown: a paraboloid cap of radius ``r_m``, ``base_m`` to ``top_m`` above ground."""
 
     x: float
     y: float
@@ -70,7 +70,7 @@ def _smoothstep(e0: float, e1: float, x: np.ndarray) -> np.ndarray:
 
 
 def _loop_polyline(n: int = 240) -> np.ndarray:
-    """The road loop: a superellipse around the field, counter-clockwise, closed."""
+    """Return the road loop: a superellipse around the field, counter-clockwise, closed."""
     th = np.linspace(0, 2 * np.pi, n + 1)
     cx, cy, ax, ay, p = -8.0, 12.0, 92.0, 78.0, 3.0
     c, s = np.cos(th), np.sin(th)
@@ -98,6 +98,9 @@ def _spur_polyline() -> np.ndarray:
             [114.0, -104.0],
         ]
     )
+    # Start on the loop itself so the network is connected at a junction.
+    loop = _loop_polyline()
+    pts = np.vstack([loop[np.argmin(np.hypot(*(loop - pts[0]).T))], pts])
     # Densify so the polyline follows the terrain closely.
     out = [pts[0]]
     for a, b in zip(pts[:-1], pts[1:], strict=True):
@@ -136,19 +139,20 @@ class World:
     trees: tuple[Tree, ...]
 
     def ground_z(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """Bare-earth elevation (m): a hill falling from the north-west to the parking lot."""
+        """Bare-earth elevation (m): a hill falling from the north-west down to the parking lot."""
         x = np.asarray(x, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
-        z = 9.0 + 7.0 * np.tanh((-x - y) / 110.0)
-        z += 0.6 * np.sin(x / 23.0) * np.cos(y / 31.0) + 0.3 * np.sin((x + 2 * y) / 13.0)
+        z = 12.0 + 10.0 * np.tanh((y - x) / 120.0)
+        z += 0.5 * np.sin(x / 29.0) * np.cos(y / 37.0) + 0.1 * np.sin((x + 2 * y) / 13.0)
         px0, px1, py0, py1 = PARKING
+        ramp = 18.0  # the lot is cut into the slope; its banks are this wide (m)
         inside = (
-            _smoothstep(px0 - 15, px0, x)
-            * (1 - _smoothstep(px1, px1 + 15, x))
-            * _smoothstep(py0 - 15, py0, y)
-            * (1 - _smoothstep(py1, py1 + 15, y))
+            _smoothstep(px0 - ramp, px0, x)
+            * (1 - _smoothstep(px1, px1 + ramp, x))
+            * _smoothstep(py0 - ramp, py0, y)
+            * (1 - _smoothstep(py1, py1 + ramp, y))
         )
-        lot_level = 9.0 + 7.0 * np.tanh(-(95.0 - 105.0) / 110.0) - 1.0
+        lot_level = 12.0 + 10.0 * np.tanh(((py0 + py1) / 2 - (px0 + px1) / 2) / 120.0) - 3.0
         return z * (1 - inside) + lot_level * inside
 
     def building_z(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -193,7 +197,7 @@ class World:
         return shapely.distance(pts, lines).reshape(np.shape(x))
 
     def in_parking(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """True inside the parking lot's paved area."""
+        """Tell whether each point lies on the parking lot's paved area."""
         px0, px1, py0, py1 = PARKING
         return (x >= px0) & (x <= px1) & (y >= py0) & (y <= py1)
 

@@ -109,7 +109,9 @@ def test_analytic_residuals_asymmetric_and_outlier_flagged_not_dropped():
     # Yaws 0, 0, 90: circular mean atan2(sin sum, cos sum) = atan2(1, 2).
     lm = HEAD_ENU[:2] + np.array([[0.0, 10.0], [10.0, 0.0], [-10.0, 0.0]])
     pans = np.array([0.0, 90.0, -90.0 - 90.0])
-    cal = calibrate_mount_yaw(HEAD_ENU, lm, pans, outlier_threshold_deg=30.0, names=["a", "b", "c"])
+    cal = calibrate_mount_yaw(
+        HEAD_ENU, lm, pans, outlier_threshold_deg=30.0, names=["a", "b", "c"], reject_outliers=False
+    )
     mean = math.degrees(math.atan2(1.0, 2.0))
     np.testing.assert_allclose(cal.yaws_deg, [0.0, 0.0, 90.0], atol=1e-12)
     assert cal.yaw_deg == pytest.approx(mean, abs=1e-12)
@@ -228,3 +230,18 @@ def test_head_from_dict_rejects_malformed(change):
 def test_landmark_reading_rejects_malformed(reading):
     with pytest.raises(CalibrationError):
         LandmarkReading.from_dict(reading)
+
+
+def test_blunder_is_excluded_from_the_yaw_when_rejecting():
+    rng = np.random.default_rng(5)
+    lm = ring_of_landmarks(rng, 8)
+    d = lm[:, :2] - HEAD_ENU[:2]
+    pans = wrap_deg(np.degrees(np.arctan2(d[:, 0], d[:, 1])) - 37.0)
+    pans[3] += 2.0  # a misread pan
+    plain = calibrate_mount_yaw(HEAD_ENU, lm, pans, reject_outliers=False)
+    robust = calibrate_mount_yaw(HEAD_ENU, lm, pans)
+    assert plain.yaw_deg == pytest.approx(37.0 - 2.0 / 8, abs=1e-3)  # dragged by blunder / k
+    assert robust.yaw_deg == pytest.approx(37.0, abs=1e-9)
+    assert robust.outliers.tolist() == [i == 3 for i in range(8)]
+    assert robust.rms_deg == pytest.approx(0.0, abs=1e-9)
+    assert "excluded" in robust.warnings[0]

@@ -1,0 +1,92 @@
+"""``demtrack geolocate``: pixel -> every ground hit along its viewing ray."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from demtrack.core.geolocate import RULES, Geolocation, GroundHit
+from demtrack.core.site import load_site
+
+from .common import add_site_argument
+
+__all__ = ["geolocation_to_dict", "print_geolocation", "register"]
+
+
+def geolocation_to_dict(sensor_id: str, g: Geolocation) -> dict:
+    """JSON-ready answer for one pixel."""
+    return {
+        "sensor": sensor_id,
+        "pixel": [g.u, g.v],
+        "rule": g.rule,
+        "status": g.status,
+        "crossed_nodata": g.crossed_nodata,
+        "ray": {
+            "origin_enu": [float(x) for x in g.origin_enu],
+            "direction_enu": [float(x) for x in g.direction_enu],
+        },
+        "selected": [h.to_dict() for h in g.selected],
+        "hits": [h.to_dict() for h in g.hits],
+        "road": g.road.to_dict() if g.road is not None else None,
+    }
+
+
+def _hit_line(tag: str, h: GroundHit) -> str:
+    e, n, u = h.p_enu
+    return (
+        f"  {tag:<8} E {e:9.3f}  N {n:9.3f}  U {u:7.3f} m | lat {h.lat_deg:.8f}"
+        f"  lon {h.lon_deg:.8f}  h {h.h_m:8.3f} m | range {h.range_m:7.2f} m"
+        f" | sigma {h.sigma_m:5.2f} m"
+    )
+
+
+def print_geolocation(g: Geolocation) -> None:
+    """Human-readable answer: the selected hits, then every hit and the road point."""
+    note = " (the ray crossed a DEM hole; a crossing may be missing)" if g.crossed_nodata else ""
+    print(f"  status {g.status}, {len(g.hits)} terrain hit(s), rule {g.rule!r}{note}")
+    chosen = {id(h) for h in g.selected}
+    for k, h in enumerate(g.hits):
+        tag = f"hit {k + 1}" + ("*" if id(h) in chosen else "")
+        print(_hit_line(tag, h))
+    if g.road is not None:
+        print(_hit_line("road*" if g.rule == "road" else "road", g.road))
+    if not g.selected:
+        print("  no point selected by this rule")
+
+
+def _run(args: argparse.Namespace) -> int:
+    site = load_site(args.site)
+    sensor = site.sensor(args.sensor)
+    geo = site.geolocator(pixel_sigma_px=args.pixel_sigma)
+    g = geo.geolocate(sensor.camera, [args.pixel[0]], [args.pixel[1]], rule=args.rule)[0]
+    if args.json:
+        print(json.dumps(geolocation_to_dict(sensor.id, g), indent=2))
+    else:
+        print(f"{sensor.id} ({sensor.name}) pixel ({g.u:g}, {g.v:g}); * = selected")
+        print_geolocation(g)
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``geolocate`` command."""
+    p = sub.add_parser("geolocate", help="geolocate an image point on the terrain")
+    add_site_argument(p)
+    p.add_argument("--sensor", required=True, metavar="ID", help="sensor id from site.json")
+    p.add_argument(
+        "--pixel",
+        required=True,
+        nargs=2,
+        type=float,
+        metavar=("U", "V"),
+        help="column and row; (0, 0) is the centre of the top-left pixel",
+    )
+    p.add_argument("--rule", choices=RULES, default="all", help="which hit(s) to report")
+    p.add_argument(
+        "--pixel-sigma",
+        type=float,
+        default=1.0,
+        metavar="PX",
+        help="1-sigma pixel error for the uncertainty (default 1)",
+    )
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=_run)
