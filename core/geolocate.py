@@ -139,6 +139,9 @@ class Geolocator:
         Rays are followed this far.
     road_cutoff_m : float
         The road rule considers crossings out to this range.
+    road_max_gap_m : float
+        The road rule gives no answer when the ray passes more than this far above or
+        below the road at its best crossing (m).
     """
 
     def __init__(
@@ -150,13 +153,23 @@ class Geolocator:
         pixel_sigma_px: float = 1.0,
         max_range_m: float = 5000.0,
         road_cutoff_m: float = 1000.0,
+        road_max_gap_m: float = 3.0,
     ) -> None:
+        for name, value in (
+            ("pixel_sigma_px", pixel_sigma_px),
+            ("max_range_m", max_range_m),
+            ("road_cutoff_m", road_cutoff_m),
+            ("road_max_gap_m", road_max_gap_m),
+        ):
+            if not float(value) > 0:
+                raise CameraError(f"{name} must be positive, got {value!r}")
         self.dem = dem
         self.frame = frame
         self.roads = roads
         self.pixel_sigma_px = float(pixel_sigma_px)
         self.max_range_m = float(max_range_m)
         self.road_cutoff_m = float(road_cutoff_m)
+        self.road_max_gap_m = float(road_max_gap_m)
 
     def geolocate(
         self,
@@ -274,7 +287,9 @@ class Geolocator:
         axes: np.ndarray,
         sig: np.ndarray,
     ) -> GroundHit | None:
-        cand = roads.best_candidate(origin, direction, self.dem, self.road_cutoff_m)
+        cand = roads.best_candidate(
+            origin, direction, self.dem, self.road_cutoff_m, self.road_max_gap_m
+        )
         if cand is None:
             return None
         rng = float(np.linalg.norm(cand.p_enu - origin))

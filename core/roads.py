@@ -150,11 +150,21 @@ class RoadNetwork:
         return out
 
     def best_candidate(
-        self, origin_enu: np.ndarray, direction_enu: np.ndarray, dem, cutoff_m: float
+        self,
+        origin_enu: np.ndarray,
+        direction_enu: np.ndarray,
+        dem,
+        cutoff_m: float,
+        max_gap_m: float = np.inf,
     ) -> RoadCandidate | None:
-        """Apply the paper's road rule: return the crossing with the smallest vertical gap."""
+        """Apply the paper's road rule: return the crossing with the smallest vertical gap.
+
+        A best crossing whose gap exceeds ``max_gap_m`` is no answer (the ray passes high
+        above every road, so the target is not on one): None.
+        """
         cands = self.ray_candidates(origin_enu, direction_enu, dem, cutoff_m)
-        return min(cands, key=lambda c: c.vertical_gap_m) if cands else None
+        best = min(cands, key=lambda c: c.vertical_gap_m) if cands else None
+        return best if best is not None and best.vertical_gap_m <= max_gap_m else None
 
     def distance_m(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Horizontal distance (m) from each point to the nearest road centre line."""

@@ -163,11 +163,20 @@ def test_road_rule_finds_the_road_behind_the_tree():
     (first,) = geo.geolocate(tree_camera(), *CENTRE, rule="first")
     np.testing.assert_allclose(first.road.p_enu, GROUND_BEHIND, atol=1e-6)
     np.testing.assert_allclose(first.best.p_enu, TREE_TOP, atol=1e-3)
-    # With the cut-off short of the far road only the near one is left (a poor answer,
-    # but the rule's): the cut-off is honoured.
+    # With the cut-off short of the far road only the near one is left; the ray passes
+    # high above it, so it is no answer unless the gap limit is relaxed.
     near = Geolocator(tree_dem(), FRAME, roads, road_cutoff_m=60.0)
     (loc,) = near.geolocate(tree_camera(), *CENTRE, rule="road")
+    assert loc.status == "no_road" and loc.best is None
+    near = Geolocator(tree_dem(), FRAME, roads, road_cutoff_m=60.0, road_max_gap_m=1e3)
+    (loc,) = near.geolocate(tree_camera(), *CENTRE, rule="road")
     np.testing.assert_allclose(loc.best.p_enu, [0.0, 20.0, 0.0], atol=1e-6)
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.0, float("nan")])
+def test_geolocator_rejects_non_positive_settings(bad):
+    with pytest.raises(CameraError, match="road_max_gap_m must be positive"):
+        Geolocator(tree_dem(), FRAME, road_max_gap_m=bad)
 
 
 def test_road_rule_without_a_crossing_or_without_roads_selects_nothing():
