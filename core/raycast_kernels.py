@@ -302,7 +302,10 @@ def _walk(
     and the ranges ``tmx``, ``tmy`` where it leaves the node through its x and y faces
     (Amanatides-Woo's tMax). A step across a face adds one node width (``dxl``, ``dyl``,
     exact powers-of-two multiples of the per-patch widths) instead of recomputing from
-    the position, which keeps the chain of dependent operations per step short.
+    the position, which keeps the chain of dependent operations per step short. The
+    choices inside a step are written as selects rather than branches: which face is
+    crossed and whether the climb applies to each axis are data-dependent and would be
+    mispredicted about half the time.
     """
     nrows, ncols = elev.shape
     pcols = ncols - 1
@@ -327,6 +330,10 @@ def _walk(
     ny = iy0 >> level
     tmx = (((nx + fx) << level) - gx0) * ikx if kx != 0.0 else np.inf
     tmy = (((ny + fy) << level) - gy0) * iky if ky != 0.0 else np.inf
+    # Node-grid shapes per level (level 0 = patches) and node-table offsets.
+    ncl = pcols if level == 0 else lvl_shape[level - 1, 1]
+    nrl = prows if level == 0 else lvl_shape[level - 1, 0]
+    koff = lvl_off[level - 1] if level > 0 else 0
     t_cur = t_a
     z_cur = z0 + t_a * uz
     count = 0
@@ -335,11 +342,11 @@ def _walk(
     while True:
         t_exit = max(min(min(tmx, tmy), t_end), t_cur)
         z_exit = z0 + t_exit * uz
-        zl = min(z_cur, z_exit)
-        zh = max(z_cur, z_exit)
+        zl = min(z_cur, z_exit) - margin
+        zh = max(z_cur, z_exit) + margin
         if level > 0:
-            k = lvl_off[level - 1] + ny * lvl_shape[level - 1, 1] + nx
-            if zl < nodes[k, 0] + margin and zh > nodes[k, 1] - margin:
+            k = koff + ny * ncl + nx
+            if zl < nodes[k, 0] and zh > nodes[k, 1]:
                 # The ray may cross the surface in this node: go down into the child it
                 # is in at t_cur (past the middle face: the far child). At the east and
                 # south edges a node may have one child only; rounding at the domain
@@ -347,24 +354,25 @@ def _walk(
                 level -= 1
                 dxl *= 0.5
                 dyl *= 0.5
-                ncl = pcols if level == 0 else lvl_shape[level - 1, 1]
-                nrl = prows if level == 0 else lvl_shape[level - 1, 0]
+                if level == 0:
+                    ncl = pcols
+                    nrl = prows
+                else:
+                    ncl = lvl_shape[level - 1, 1]
+                    nrl = lvl_shape[level - 1, 0]
+                    koff = lvl_off[level - 1]
                 if kx != 0.0:
                     t_mid = (((2 * nx + 1) << level) - gx0) * ikx
-                    if t_mid <= t_cur or (fx == 0 and 2 * nx + 1 >= ncl):
-                        nx = 2 * nx + fx
-                    else:
-                        nx = 2 * nx + 1 - fx
-                        tmx = t_mid
+                    far = t_mid <= t_cur or (fx == 0 and 2 * nx + 1 >= ncl)
+                    nx = 2 * nx + (fx if far else 1 - fx)
+                    tmx = tmx if far else t_mid
                 else:
                     nx = ix0 >> level
                 if ky != 0.0:
                     t_mid = (((2 * ny + 1) << level) - gy0) * iky
-                    if t_mid <= t_cur or (fy == 0 and 2 * ny + 1 >= nrl):
-                        ny = 2 * ny + fy
-                    else:
-                        ny = 2 * ny + 1 - fy
-                        tmy = t_mid
+                    far = t_mid <= t_cur or (fy == 0 and 2 * ny + 1 >= nrl)
+                    ny = 2 * ny + (fy if far else 1 - fy)
+                    tmy = tmy if far else t_mid
                 else:
                     ny = iy0 >> level
                 # Never index past the grid, whatever the rounding at the exit point.
@@ -390,10 +398,7 @@ def _walk(
                     s = _solve_at(elev, ny - 1, nx, gx0, gy0, kx, ky, uz, t_cur, z_cur)
                 if on_x and on_y and s != s:
                     s = _solve_at(elev, ny - 1, nx - 1, gx0, gy0, kx, ky, uz, t_cur, z_cur)
-            elif (
-                zl < max(max(e00, e01), max(e10, e11)) + margin
-                and zh > min(min(e00, e01), min(e10, e11)) - margin
-            ):
+            elif zl < max(max(e00, e01), max(e10, e11)) and zh > min(min(e00, e01), min(e10, e11)):
                 s = _solve_patch(e00, e01, e10, e11, nx, ny, gx0, gy0, kx, ky, uz, t_cur, z_cur)
             seg = t_exit - t_cur
             if s >= -ROOT_WINDOW_M and s <= seg + ROOT_WINDOW_M:
@@ -408,36 +413,31 @@ def _walk(
         # Nothing (more) in this node: step through the face crossed first.
         if t_exit >= t_end:
             break
-        if tmx <= tmy:
-            nx += sx
-            if nx < 0 or nx >= (pcols if level == 0 else lvl_shape[level - 1, 1]):
-                break
-            t_cur = tmx
-            tmx += dxl
-            # Entered a new parent through its near face: climb to it, one level.
-            up = (nx & 1) != fx
-            if up and level < top:
-                tmx += dxl
-                if (ny & 1) != fy:
-                    tmy += dyl
-        else:
-            ny += sy
-            if ny < 0 or ny >= (prows if level == 0 else lvl_shape[level - 1, 0]):
-                break
-            t_cur = tmy
-            tmy += dyl
-            up = (ny & 1) != fy
-            if up and level < top:
-                tmy += dyl
-                if (nx & 1) != fx:
-                    tmx += dxl
+        bx = tmx <= tmy
+        t_cur = min(tmx, tmy)
+        nx = nx + sx if bx else nx
+        ny = ny if bx else ny + sy
+        tmx = tmx + dxl if bx else tmx
+        tmy = tmy if bx else tmy + dyl
+        if nx < 0 or nx >= ncl or ny < 0 or ny >= nrl:
+            break
         z_cur = z_exit
-        if up and level < top:
+        # Entered a new parent through its near face: climb to it, one level. The
+        # parent's exit along an axis is one child width further when the ray is in
+        # the near child along that axis.
+        near_x = (nx & 1) != fx
+        near_y = (ny & 1) != fy
+        if (near_x if bx else near_y) and level < top:
+            tmx = tmx + dxl if near_x else tmx
+            tmy = tmy + dyl if near_y else tmy
             nx >>= 1
             ny >>= 1
             level += 1
             dxl *= 2.0
             dyl *= 2.0
+            ncl = lvl_shape[level - 1, 1]
+            nrl = lvl_shape[level - 1, 0]
+            koff = lvl_off[level - 1]
     return count, crossed
 
 

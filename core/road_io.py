@@ -3,7 +3,8 @@
 A road file is a FeatureCollection of LineString (or MultiLineString) features; the
 optional properties ``name`` and ``width_m`` are kept. Coordinates are converted to the
 site frame through the site's :class:`~demtrack.core.geodesy.LocalFrame`; heights in the
-file, if any, are ignored (a road lies on the DEM).
+file, if any, are ignored (a road lies on the DEM): positions are read and written at
+the anchor's height, local up = 0.
 """
 
 from __future__ import annotations
@@ -60,7 +61,10 @@ def read_roads_geojson(path: str | Path, frame: LocalFrame) -> RoadNetwork:
                 raise InputFileError(f"road feature {k}: malformed coordinates") from None
             if lonlat.ndim != 2 or len(lonlat) < 2 or not np.isfinite(lonlat).all():
                 raise InputFileError(f"road feature {k}: needs at least two finite positions")
-            e, n, _ = frame.to_enu(lonlat[:, 1], lonlat[:, 0], np.zeros(len(lonlat)))
+            # 2-D positions: place them at the anchor's height (local up 0), the height
+            # the writer uses; a vertical offset dz moves e/n by dz * d / R (< 1 mm here).
+            h = np.full(len(lonlat), frame.h_m)
+            e, n, _ = frame.to_enu(lonlat[:, 1], lonlat[:, 0], h)
             coords.append(np.column_stack([e, n]))
             names.append(str(props.get("name", f"road {len(names)}")))
             widths.append(float(props.get("width_m", 6.0)))

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from demtrack.core.crs_import import local_crs_wkt, points_to_local, read_raster_to_local
-from demtrack.core.dem import Dem
+from demtrack.core.dem import VERTICAL_DATUM_LOCAL, Dem
 from demtrack.core.errors import CrsError, InputFileError
 from demtrack.core.geodesy import as_crs
 from demtrack.core.site import load_site
@@ -81,15 +81,18 @@ def _run(args: argparse.Namespace) -> int:
     dem = Dem.from_points(pts, args.cell, bounds=bounds, crs_wkt=crs_wkt)
     holes = int(dem.nodata.sum())
     if args.fill is not None:
-        if args.site is not None:
+        coarse_dem = Dem.read(args.fill)
+        same_crs = coarse_dem.crs_wkt is not None and as_crs(coarse_dem.crs_wkt) == as_crs(crs_wkt)
+        if args.site is not None and not (
+            same_crs and coarse_dem.vertical_datum == VERTICAL_DATUM_LOCAL
+        ):
+            # Another CRS, or heights above a datum: warp into the site frame exactly.
             coarse = read_raster_to_local(
                 args.fill, site.frame, dem.grid, geoid_undulation_m=site.geoid_undulation_m
             )
             coarse_dem = Dem(dem.grid, coarse)
-        else:
-            coarse_dem = Dem.read(args.fill)
-            if coarse_dem.crs_wkt is None or as_crs(coarse_dem.crs_wkt) != as_crs(crs_wkt):
-                raise CrsError(f"{args.fill} is not in {args.crs}; pass --site to warp it")
+        elif not same_crs:
+            raise CrsError(f"{args.fill} is not in {args.crs}; pass --site to warp it")
         dem = dem.fill_holes(coarse_dem, coarse_sigma_m=args.fill_sigma)
     args.output.parent.mkdir(parents=True, exist_ok=True)
     dem.write(args.output)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -61,7 +62,7 @@ def build_sample_site(
 
     points = simulate_laser_scan(world)
     np.save(out / "laser_points.npy", points.astype(np.float32))
-    coarse = coarse_dem(world)
+    coarse = replace(coarse_dem(world), crs_wkt=crs)
     coarse.write(out / "coarse_dem_30m.tif")
     box = (-EXTENT_M, -EXTENT_M, EXTENT_M, EXTENT_M)
     raw = Dem.from_points(points, DEM_CELL_M, bounds=box, crs_wkt=crs)

@@ -1,0 +1,192 @@
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from demtrack.cli import main
+from demtrack.core.dem import Dem
+from demtrack.core.site import load_site
+
+
+def run(capsys, *argv):
+    status = main(list(argv))
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def test_geolocate_json_matches_the_engine(capsys, sample_site_dir):
+    status, out, _ = run(
+        capsys,
+        "geolocate",
+        "--site",
+        str(sample_site_dir),
+        "--sensor",
+        "cam3",
+        "--pixel",
+        "700",
+        "500",
+        "--rule",
+        "all",
+        "--json",
+    )
+    assert status == 0
+    doc = json.loads(out)
+    site = load_site(sample_site_dir)
+    (g,) = site.geolocator().geolocate(site.sensor("cam3").camera, [700.0], [500.0], rule="all")
+    assert doc["status"] == g.status and len(doc["hits"]) == len(g.hits) >= 1
+    for h, ref in zip(doc["hits"], g.hits, strict=True):
+        assert [h["e_m"], h["n_m"], h["u_m"]] == pytest.approx(list(ref.p_enu), abs=1e-9)
+        lat, lon, hh = site.frame.to_geodetic(*ref.p_enu)
+        assert (h["lat_deg"], h["lon_deg"], h["h_m"]) == pytest.approx((lat, lon, hh))
+        assert h["sigma_m"] > 0 and h["range_m"] > 0
+
+
+def test_geolocate_text_lists_every_hit_and_marks_the_rule(capsys, sample_site_dir):
+    status, out, _ = run(
+        capsys,
+        "geolocate",
+        "--site",
+        str(sample_site_dir),
+        "--sensor",
+        "cam1",
+        "--pixel",
+        "640",
+        "600",
+        "--rule",
+        "last",
+    )
+    assert status == 0
+    assert "cam1 (Museum roof) pixel (640, 600)" in out
+    assert "hit 1" in out and "lat 40.35" in out and "*" in out
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--sensor", "cam9", "--pixel", "1", "1"], "unknown sensor 'cam9'; this site has: cam1"),
+        (["--sensor", "cam1", "--pixel", "5000", "1"], "pixel (5000, 1) is outside the 1280x720"),
+        (["--sensor", "cam1", "--pixel", "nan", "1"], "is outside the"),
+    ],
+)
+def test_geolocate_bad_input_is_one_line_and_status_2(capsys, sample_site_dir, argv, message):
+    status, out, err = run(capsys, "geolocate", "--site", str(sample_site_dir), *argv)
+    assert status == 2 and out == ""
+    assert message in err and err.count("\n") == 1 and err.startswith("demtrack geolocate: error:")
+
+
+def test_missing_site_is_one_line(capsys, tmp_path):
+    status, _, err = run(
+        capsys, "geolocate", "--site", str(tmp_path / "x"), "--sensor", "a", "--pixel", "1", "1"
+    )
+    assert status == 2 and "site folder not found" in err and err.count("\n") == 1
+
+
+def test_calibrate_yaw_prints_residuals_and_flags_the_blunder(capsys, sample_site_dir):
+    status, out, _ = run(
+        capsys, "calibrate-yaw", "--site", str(sample_site_dir), "--sensor", "cam2"
+    )
+    assert status == 0
+    truth = json.loads((sample_site_dir / "truth.json").read_text())["sensors"]["cam2"]
+    assert f"mount yaw {truth['calibrated_mount_yaw_deg']:.4f} deg" in out
+    assert "lot NE corner" in out and "OUTLIER" in out
+    status, out, _ = run(
+        capsys,
+        "calibrate-yaw",
+        "--site",
+        str(sample_site_dir),
+        "--sensor",
+        "cam2",
+        "--json",
+        "--keep-outliers",
+    )
+    doc = json.loads(out)
+    # The plain circular mean is dragged by the 2-degree blunder over 10 landmarks.
+    assert doc["yaw_deg"] - truth["calibrated_mount_yaw_deg"] == pytest.approx(-0.2, abs=0.03)
+    assert sum(lm["outlier"] for lm in doc["landmarks"]) == 1
+
+
+def test_build_dem_from_npy_and_csv_with_fill(capsys, tmp_path, sample_site_dir):
+    rng = np.random.default_rng(0)
+    pts = np.column_stack(
+        [rng.uniform(-20, 20, 4000), rng.uniform(-20, 20, 4000), rng.normal(5.0, 0.1, 4000)]
+    )
+    pts = pts[np.hypot(pts[:, 0], pts[:, 1]) > 5]  # a hole in the middle
+    np.save(tmp_path / "p.npy", pts)
+    np.savetxt(tmp_path / "p.csv", pts, delimiter=",", header="x,y,z", comments="")
+    site = str(sample_site_dir)
+    for name in ("p.npy", "p.csv"):
+        out_tif = tmp_path / f"{name}.tif"
+        status, out, _ = run(
+            capsys,
+            "build-dem",
+            str(tmp_path / name),
+            "-o",
+            str(out_tif),
+            "--cell",
+            "1",
+            "--bounds",
+            "-20",
+            "-20",
+            "20",
+            "20",
+            "--site",
+            site,
+            "--fill",
+            str(sample_site_dir / "coarse_dem_30m.tif"),
+        )
+        assert status == 0 and "filled from" in out
+        dem = Dem.read(out_tif)
+        assert dem.grid.shape == (40, 40) and dem.count.sum() == len(pts)
+        assert dem.filled[20, 20] and not dem.nodata.any()
+        ref = Dem.from_points(pts, 1.0, bounds=(-20, -20, 20, 20))
+        has = ref.count > 0
+        np.testing.assert_allclose(dem.elevation[has], ref.elevation[has], atol=1e-5)
+
+
+@pytest.mark.parametrize(
+    ("content", "extra", "message"),
+    [
+        ("x,y,z\n1,2,3\n", [], "the points' CRS is missing"),
+        ("x,y,z\n1,2\n", ["--crs", "EPSG:32617"], "malformed point file"),
+        ("x,y,z\n1,2,3\n", ["--crs", "EPSG:4326"], "not a projected CRS"),
+    ],
+)
+def test_build_dem_bad_input(capsys, tmp_path, content, extra, message):
+    (tmp_path / "p.csv").write_text(content)
+    status, _, err = run(
+        capsys, "build-dem", str(tmp_path / "p.csv"), "-o", str(tmp_path / "d.tif"), *extra
+    )
+    assert status == 2 and message in err and err.count("\n") == 1
+
+
+def test_demo_walks_through_the_site(capsys, sample_site_dir):
+    status, out, _ = run(capsys, "demo", "--site", str(sample_site_dir))
+    assert status == 0
+    assert out.count("every hit along the ray") == 3 and "lat 40.35" in out
+
+
+def test_console_script_exit_status_and_no_traceback(tmp_path):
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "demtrack.cli",
+            "calibrate-yaw",
+            "--site",
+            str(tmp_path),
+            "--sensor",
+            "x",
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert proc.returncode == 2
+    assert (
+        proc.stderr.strip()
+        == f"demtrack calibrate-yaw: error: not a site folder (no site.json): {tmp_path}"
+    )
