@@ -6,7 +6,10 @@ import argparse
 import shutil
 from pathlib import Path
 
-from demtrack.core.site import MANIFEST, load_site
+import numpy as np
+
+from demtrack.core.geolocate import Geolocator
+from demtrack.core.site import MANIFEST, Sensor, Site, load_site
 
 from .common import DEFAULT_SITE
 from .geolocate import print_geolocation
@@ -32,6 +35,29 @@ def _sample_site(args: argparse.Namespace) -> int:
     return 0
 
 
+def _showcase_pixel(site: Site, sensor: Sensor, geo: Geolocator) -> tuple[float, float, str]:
+    """A pixel whose ray meets the terrain several times and ends on a road, if any.
+
+    That is the paper's case: a tree crown in front of the road takes the first hit.
+    """
+    intr = sensor.camera.intrinsics
+    v, u = np.mgrid[8 : intr.height : 16, 8 : intr.width : 16]
+    results = geo.geolocate(sensor.camera, u.ravel().astype(float), v.ravel().astype(float))
+    if site.roads is not None:
+        for g in results:
+            if len(g.hits) < 2:
+                continue
+            first, last = g.hits[0].p_enu, g.hits[-1].p_enu
+            var = site.dem.sample_variance(
+                np.array([first[0], last[0]]), np.array([first[1], last[1]])
+            )
+            # Laser returns spread through a crown (high variance); a road is smooth.
+            on_road = site.roads.distance_m(last[:1], last[1:2])[0] < 3.0
+            if on_road and var[0] > 1.0 and var[1] < 0.05:
+                return g.u, g.v, "(a crown in front of the road)"
+    return (intr.width - 1) / 2, intr.height * 0.8, "(open ground)"
+
+
 def _demo(args: argparse.Namespace) -> int:
     site = load_site(ensure_sample_site(args.site))
     print(
@@ -46,9 +72,10 @@ def _demo(args: argparse.Namespace) -> int:
     )
     geo = site.geolocator()
     for sensor in site.sensors.values():
-        intr = sensor.camera.intrinsics
-        u, v = (intr.width - 1) / 2, intr.height * 0.8
-        print(f"\n{sensor.id} ({sensor.name}), pixel ({u:g}, {v:g}), every hit along the ray:")
+        u, v, why = _showcase_pixel(site, sensor, geo)
+        print(
+            f"\n{sensor.id} ({sensor.name}), pixel ({u:g}, {v:g}) {why}; every hit along the ray:"
+        )
         print_geolocation(geo.geolocate(sensor.camera, [u], [v], rule="all")[0])
     print("\nnext: demtrack geolocate --sensor cam1 --pixel U V --rule all")
     return 0
