@@ -57,6 +57,7 @@ BLOCK = 64
 ROOT_WINDOW_M = 1e-6
 #: Crossings closer than this (m) to the previous one are the same crossing found twice.
 DEDUPE_M = 1e-5
+CLIMB_MAX = 99
 
 
 @njit(parallel=True, cache=True)
@@ -428,13 +429,18 @@ def _walk(
         near_x = (nx & 1) != fx
         near_y = (ny & 1) != fy
         if (near_x if bx else near_y) and level < top:
-            tmx = tmx + dxl if near_x else tmx
-            tmy = tmy + dyl if near_y else tmy
-            nx >>= 1
-            ny >>= 1
-            level += 1
-            dxl *= 2.0
-            dyl *= 2.0
+            while True:
+                tmx = tmx + dxl if near_x else tmx
+                tmy = tmy + dyl if near_y else tmy
+                nx >>= 1
+                ny >>= 1
+                level += 1
+                dxl *= 2.0
+                dyl *= 2.0
+                near_x = (nx & 1) != fx
+                near_y = (ny & 1) != fy
+                if not ((near_x if bx else near_y) and level < top and level < CLIMB_MAX):
+                    break
             ncl = lvl_shape[level - 1, 1]
             nrl = lvl_shape[level - 1, 0]
             koff = lvl_off[level - 1]
