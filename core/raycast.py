@@ -238,15 +238,16 @@ class RayCaster:
         np.cumsum(counts, out=offsets[1:])
         m = int(offsets[-1])
         range_m = np.empty(m, np.float64)
-        # Hits that fit the first-pass buffer are copied; the few rays with more are
-        # re-walked straight into their CSR slots.
-        _k.gather_hits_kernel(buf, counts, offsets, range_m)
-        del buf
-        big = np.flatnonzero(counts > cap)
-        if len(big):
-            _k.cast_all_refill_kernel(*args, max_hits, big.astype(np.int64), offsets, range_m)
         points = np.empty((m, 3), np.float64)
-        _k.hit_points_kernel(o, d, offsets, range_m, points)
+        # Hits that fit the first-pass buffer are copied (with their points); the few
+        # rays with more are re-walked straight into their CSR slots.
+        _k.gather_hits_kernel(buf, counts, offsets, o, d, range_m, points)
+        del buf
+        if not first:
+            big = np.flatnonzero(counts > cap).astype(np.int64)
+            if len(big):
+                _k.cast_all_refill_kernel(*args, max_hits, big, offsets, range_m)
+                _k.hit_points_kernel(o, d, big, offsets, range_m, points)
         return RayHits(offsets, range_m, points, status, crossed, truncated)
 
 
@@ -330,18 +331,19 @@ def _validate_rays(
         raise RaycastError(f"origins must have shape (n, 3), got {o.shape}")
     if d.shape != o.shape:
         raise RaycastError(f"directions must have shape {o.shape}, got {d.shape}")
-    if not np.isfinite(o).all():
-        raise RaycastError("origins must be finite")
-    if not np.isfinite(d).all():
-        raise RaycastError("directions must be finite")
-    norm2 = np.einsum("ij,ij->i", d, d)
-    if (norm2 <= 0).any():
-        i = int(np.flatnonzero(norm2 <= 0)[0])
-        raise RaycastError(f"direction of ray {i} is zero")
     try:
         rng = np.broadcast_to(np.asarray(max_range, dtype=np.float64), (len(o),))
     except (TypeError, ValueError):
         raise RaycastError(f"max_range must be a number or an array of shape ({len(o)},)") from None
-    if np.isnan(rng).any() or (rng < 0).any():
-        raise RaycastError("max_range must be >= 0 (inf allowed), not NaN")
-    return o, d, np.array(rng, dtype=np.float64)
+    # A fresh writable C array always, so the kernels see one signature only.
+    rng = np.array(rng, dtype=np.float64)
+    code, i = _k.check_rays_kernel(o, d, rng)
+    if code == 1:
+        raise RaycastError(f"origins must be finite (ray {i} is not)")
+    if code == 2:
+        raise RaycastError(f"directions must be finite (ray {i} is not)")
+    if code == 3:
+        raise RaycastError(f"direction of ray {i} is zero")
+    if code == 4:
+        raise RaycastError(f"max_range must be >= 0 (inf allowed), not NaN (ray {i})")
+    return o, d, rng

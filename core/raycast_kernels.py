@@ -41,6 +41,9 @@ __all__ = [
     "build_pyramid_kernel",
     "cast_all_refill_kernel",
     "cast_kernel",
+    "check_rays_kernel",
+    "gather_hits_kernel",
+    "hit_points_kernel",
 ]
 
 # Status codes; ``core.raycast.RayStatus`` mirrors them (a test checks).
@@ -57,7 +60,6 @@ BLOCK = 64
 ROOT_WINDOW_M = 1e-6
 #: Crossings closer than this (m) to the previous one are the same crossing found twice.
 DEDUPE_M = 1e-5
-CLIMB_MAX = 99
 
 
 @njit(parallel=True, cache=True)
@@ -316,9 +318,9 @@ def _walk(
     iy0 = min(max(int(math.floor(gy0 + t_a * ky)), 0), prows - 1)
     # Start at the coarsest level whose nodes are not much larger than the footprint.
     foot = (t_end - t_a) * max(abs(kx), abs(ky))
-    level = top
-    while level > 1 and (1 << (level - 1)) > 0.25 * foot + 2.0:
-        level -= 1
+    # The largest level with 2**(level - 1) <= 0.25 foot + 2, in [1, top]: frexp's
+    # exponent is floor(log2(v)) + 1.
+    level = max(1, min(top, math.frexp(0.25 * foot + 2.0)[1]))
     fx = 1 if kx > 0.0 else 0
     fy = 1 if ky > 0.0 else 0
     sx = 1 if kx > 0.0 else -1
@@ -429,18 +431,13 @@ def _walk(
         near_x = (nx & 1) != fx
         near_y = (ny & 1) != fy
         if (near_x if bx else near_y) and level < top:
-            while True:
-                tmx = tmx + dxl if near_x else tmx
-                tmy = tmy + dyl if near_y else tmy
-                nx >>= 1
-                ny >>= 1
-                level += 1
-                dxl *= 2.0
-                dyl *= 2.0
-                near_x = (nx & 1) != fx
-                near_y = (ny & 1) != fy
-                if not ((near_x if bx else near_y) and level < top and level < CLIMB_MAX):
-                    break
+            tmx = tmx + dxl if near_x else tmx
+            tmy = tmy + dyl if near_y else tmy
+            nx >>= 1
+            ny >>= 1
+            level += 1
+            dxl *= 2.0
+            dyl *= 2.0
             ncl = lvl_shape[level - 1, 1]
             nrl = lvl_shape[level - 1, 0]
             koff = lvl_off[level - 1]
@@ -610,26 +607,40 @@ def cast_all_refill_kernel(
         )
 
 
-@njit(parallel=True, cache=True)
-def gather_hits_kernel(buf, counts, offsets, range_out):  # pragma: no cover - numba
-    """Copy the hits of rays whose count fits ``buf`` into their CSR slots."""
+@njit(parallel=True, cache=True, error_model="numpy")
+def gather_hits_kernel(
+    buf, counts, offsets, origins, directions, range_out, points
+):  # pragma: no cover - numba
+    """Copy the hits of rays whose count fits ``buf`` into their CSR slots, with points.
+
+    ``points[j] = origin + range_out[j] * unit direction``; rays with more hits than
+    ``buf`` holds are left to :func:`cast_all_refill_kernel` and :func:`hit_points_kernel`.
+    """
     cap = buf.shape[1]
     for i in prange(counts.shape[0]):
         c = counts[i]
-        if c <= cap:
-            lo = offsets[i]
-            for j in range(c):
-                range_out[lo + j] = buf[i, j]
+        if c == 0 or c > cap:
+            continue
+        dx = directions[i, 0]
+        dy = directions[i, 1]
+        dz = directions[i, 2]
+        norm = math.sqrt(dx * dx + dy * dy + dz * dz)
+        lo = offsets[i]
+        for j in range(c):
+            t = buf[i, j]
+            range_out[lo + j] = t
+            points[lo + j, 0] = origins[i, 0] + t * (dx / norm)
+            points[lo + j, 1] = origins[i, 1] + t * (dy / norm)
+            points[lo + j, 2] = origins[i, 2] + t * (dz / norm)
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def hit_points_kernel(origins, directions, offsets, range_m, points):  # pragma: no cover
-    """``points[j] = origin + range_m[j] * unit direction`` for every hit (CSR)."""
-    for i in prange(origins.shape[0]):
+def hit_points_kernel(origins, directions, rays, offsets, range_m, points):  # pragma: no cover
+    """``points[j] = origin + range_m[j] * unit direction`` for the hits of ``rays`` (CSR)."""
+    for q in prange(rays.shape[0]):
+        i = rays[q]
         lo = offsets[i]
         hi = offsets[i + 1]
-        if hi == lo:
-            continue
         dx = directions[i, 0]
         dy = directions[i, 1]
         dz = directions[i, 2]
@@ -639,3 +650,28 @@ def hit_points_kernel(origins, directions, offsets, range_m, points):  # pragma:
             points[j, 0] = origins[i, 0] + t * (dx / norm)
             points[j, 1] = origins[i, 1] + t * (dy / norm)
             points[j, 2] = origins[i, 2] + t * (dz / norm)
+
+
+@njit(cache=True)
+def check_rays_kernel(origins, directions, max_range):  # pragma: no cover - numba
+    """First problem in a batch of rays, as ``(code, ray)``; ``(0, -1)`` when none.
+
+    Codes: 1 a non-finite origin, 2 a non-finite direction, 3 a zero direction,
+    4 a NaN or negative ``max_range``. One pass, no temporaries.
+    """
+    for i in range(origins.shape[0]):
+        ox = origins[i, 0]
+        oy = origins[i, 1]
+        oz = origins[i, 2]
+        if not (math.isfinite(ox) and math.isfinite(oy) and math.isfinite(oz)):
+            return 1, i
+        dx = directions[i, 0]
+        dy = directions[i, 1]
+        dz = directions[i, 2]
+        if not (math.isfinite(dx) and math.isfinite(dy) and math.isfinite(dz)):
+            return 2, i
+        if not dx * dx + dy * dy + dz * dz > 0.0:
+            return 3, i
+        if not max_range[i] >= 0.0:
+            return 4, i
+    return 0, -1
