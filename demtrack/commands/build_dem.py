@@ -11,66 +11,41 @@ from demtrack.core.crs_import import local_crs_wkt, points_to_local, read_raster
 from demtrack.core.dem import VERTICAL_DATUM_LOCAL, Dem
 from demtrack.core.errors import CrsError, InputFileError
 from demtrack.core.geodesy import as_crs
+from demtrack.core.pointcloud import read_point_cloud
 from demtrack.core.site import load_site
 
-__all__ = ["read_points", "register"]
-
-
-def read_points(path: Path) -> np.ndarray:
-    """Points ``(n, 3)`` from ``.npy`` (an (n, 3) array) or ``.csv`` (x, y, z columns)."""
-    suffix = path.suffix.lower()
-    if not path.is_file():
-        raise InputFileError(f"point file not found: {path}")
-    try:
-        if suffix == ".npy":
-            pts = np.load(path, allow_pickle=False)
-        elif suffix in (".csv", ".txt", ".xyz"):
-            with path.open(encoding="utf-8") as fh:
-                first = fh.readline()
-            header = any(c.isalpha() for c in first.replace("e", "").replace("E", ""))
-            pts = np.loadtxt(
-                path,
-                delimiter="," if "," in first else None,
-                skiprows=1 if header else 0,
-                usecols=(0, 1, 2),
-                ndmin=2,
-            )
-        else:
-            raise InputFileError(
-                f"unsupported point file {path.name}: use .npy or .csv (LAS/LAZ is planned)"
-            )
-    except ValueError as exc:
-        raise InputFileError(f"malformed point file {path}: {str(exc).splitlines()[0]}") from None
-    pts = np.asarray(pts, dtype=np.float64)
-    if pts.ndim != 2 or pts.shape[1] < 3:
-        raise InputFileError(f"{path}: points must be an (n, 3) array of x, y, z; got {pts.shape}")
-    if len(pts) == 0:
-        raise InputFileError(f"{path}: no points")
-    return pts[:, :3]
+__all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
-    pts = read_points(args.points)
+    cloud = read_point_cloud(args.points).select(
+        ground_only=args.ground_only, first_returns=args.first_returns
+    )
+    if len(cloud) == 0:
+        raise InputFileError(f"{args.points}: no points left after the class/return selection")
+    pts = cloud.xyz
+    points_crs = args.crs or cloud.crs_wkt
     bounds = tuple(args.bounds) if args.bounds else None
     if args.site is not None:
         site = load_site(args.site)
-        if args.crs:
+        if points_crs:
             e, n, u = points_to_local(
                 pts[:, 0],
                 pts[:, 1],
                 pts[:, 2],
-                args.crs,
+                points_crs,
                 site.frame,
                 geoid_undulation_m=site.geoid_undulation_m,
             )
             pts = np.column_stack([e, n, u])
         crs_wkt = local_crs_wkt(site.frame)
-    elif args.crs:
-        crs = as_crs(args.crs)
-        if not crs.is_projected:
+    elif points_crs:
+        crs = as_crs(points_crs)
+        unit = crs.axis_info[0].unit_name if crs.axis_info else ""
+        if not crs.is_projected or unit not in ("metre", "meter"):
             raise CrsError(
-                f"--crs {args.crs} is not a projected CRS in metres; grid in a site "
-                "frame with --site DIR instead"
+                f"the points' CRS {crs.name!r} is not projected in metres; grid them in a "
+                "site frame with --site DIR instead"
             )
         crs_wkt = crs.to_wkt()
     else:
@@ -108,7 +83,7 @@ def _run(args: argparse.Namespace) -> int:
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``build-dem`` command."""
     p = sub.add_parser("build-dem", help="grid laser points into a DEM GeoTIFF")
-    p.add_argument("points", type=Path, help="points: .npy (n x 3) or .csv with x,y,z")
+    p.add_argument("points", type=Path, help="points: .las/.laz, .npy (n x 3) or .csv x,y,z")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="DEM.tif")
     p.add_argument("--cell", type=float, default=0.5, help="cell size in m (default 0.5)")
     p.add_argument(
@@ -126,5 +101,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--bounds", type=float, nargs=4, metavar=("XMIN", "YMIN", "XMAX", "YMAX"))
     p.add_argument("--site", type=Path, metavar="DIR", help="grid in this site's frame")
-    p.add_argument("--crs", help="CRS of the points (EPSG code, WKT or PROJ string)")
+    p.add_argument(
+        "--crs", help="CRS of the points (EPSG code, WKT or PROJ string); LAS/LAZ state their own"
+    )
+    p.add_argument(
+        "--ground-only", action="store_true", help="LAS/LAZ: ground points only (class 2)"
+    )
+    p.add_argument(
+        "--first-returns", action="store_true", help="LAS/LAZ: first returns only (a surface)"
+    )
     p.set_defaults(func=_run)

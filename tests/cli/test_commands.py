@@ -152,7 +152,8 @@ def test_build_dem_from_npy_and_csv_with_fill(capsys, tmp_path, sample_site_dir)
     [
         ("x,y,z\n1,2,3\n", [], "the points' CRS is missing"),
         ("x,y,z\n1,2\n", ["--crs", "EPSG:32617"], "malformed point file"),
-        ("x,y,z\n1,2,3\n", ["--crs", "EPSG:4326"], "not a projected CRS"),
+        ("x,y,z\n1,2,3\n", ["--crs", "EPSG:4326"], "is not projected in metres"),
+        ("x,y,z\n1,2,3\n", ["--crs", "EPSG:2272"], "is not projected in metres"),
     ],
 )
 def test_build_dem_bad_input(capsys, tmp_path, content, extra, message):
@@ -190,3 +191,42 @@ def test_console_script_exit_status_and_no_traceback(tmp_path):
         proc.stderr.strip()
         == f"demtrack calibrate-yaw: error: not a site folder (no site.json): {tmp_path}"
     )
+
+
+def test_build_dem_from_laz_in_utm_lands_in_the_site_frame(
+    capsys, tmp_path, sample_site_dir, write_las
+):
+    from pyproj import Transformer
+
+    rng = np.random.default_rng(1)
+    e, n = rng.uniform(-10, 10, 3000), rng.uniform(-10, 10, 3000)
+    site = load_site(sample_site_dir)
+    lat, lon, _ = site.frame.to_geodetic(e, n, np.zeros_like(e))
+    x, y = Transformer.from_crs("EPSG:4326", "EPSG:32617", always_xy=True).transform(lon, lat)
+    h = site.frame.h_m + 10.0  # ellipsoidal heights, 10 m above the anchor
+    classes = np.where(np.arange(3000) % 3 == 0, 5, 2).astype(np.uint8)  # a third are trees
+    z = np.where(classes == 2, h, h + 8.0)
+    write_las(tmp_path / "p.laz", np.column_stack([x, y, z]), classes, np.ones(3000, np.uint8))
+    status, out, _ = run(
+        capsys,
+        "build-dem",
+        str(tmp_path / "p.laz"),
+        "-o",
+        str(tmp_path / "d.tif"),
+        "--site",
+        str(sample_site_dir),
+        "--cell",
+        "2",
+        "--bounds",
+        "-10",
+        "-10",
+        "10",
+        "10",
+        "--ground-only",
+    )
+    assert status == 0, out
+    dem = Dem.read(tmp_path / "d.tif")
+    assert dem.count.sum() == 2000
+    # Local up of a point 10 m above the anchor's ellipsoid height, <= 10 m away: 10 m
+    # minus the earth's curvature drop (d^2 / 2R < 0.01 mm).
+    np.testing.assert_allclose(dem.elevation[dem.count > 0], 10.0, atol=2e-3)
