@@ -22,13 +22,13 @@ from .roads import RoadNetwork
 __all__ = ["read_roads_geojson", "roads_to_geojson", "write_roads_geojson"]
 
 
-def _lines_of(feature: dict[str, Any], k: int) -> list[list]:
+def _lines_of(feature: dict[str, Any], k: int) -> list[Any]:
     geom = feature.get("geometry") or {}
     kind = geom.get("type")
     coords = geom.get("coordinates")
-    if kind == "LineString":
+    if kind == "LineString" and coords is not None:
         return [coords]
-    if kind == "MultiLineString":
+    if kind == "MultiLineString" and isinstance(coords, list):
         return list(coords)
     raise InputFileError(f"road feature {k}: geometry must be a LineString, got {kind!r}")
 
@@ -51,7 +51,9 @@ def read_roads_geojson(path: str | Path, frame: LocalFrame) -> RoadNetwork:
         raise InputFileError(f"road file {path} is not valid JSON: {exc.msg}") from None
     if not isinstance(doc, dict) or doc.get("type") != "FeatureCollection":
         raise InputFileError(f"road file {path} must be a GeoJSON FeatureCollection")
-    coords, names, widths = [], [], []
+    coords: list[np.ndarray] = []
+    names: list[str] = []
+    widths: list[float] = []
     for k, feature in enumerate(doc.get("features") or []):
         props = feature.get("properties") or {}
         for part in _lines_of(feature, k):

@@ -133,7 +133,7 @@ def _sensor(root: Path, doc: Any, k: int) -> Sensor:
         raise SiteError(f"site.json: sensor {k} needs a non-empty string 'id'")
     where = f"site.json: sensor {sid!r}"
     try:
-        head = PanTiltHead.from_dict(doc.get("head"))
+        head = PanTiltHead.from_dict(doc.get("head"))  # type: ignore[arg-type]  # checked there
     except DemtrackError as exc:
         raise SiteError(f"{where}: {exc}") from None
     image = doc.get("image")
@@ -173,7 +173,7 @@ def load_site(root: str | Path) -> Site:
             f"this demtrack reads version {SITE_FORMAT_VERSION}"
         )
     try:
-        frame = LocalFrame.from_dict(doc.get("frame"))
+        frame = LocalFrame.from_dict(doc.get("frame"))  # type: ignore[arg-type]  # checked there
     except DemtrackError as exc:
         raise SiteError(f"site.json: frame: {exc}") from None
     try:

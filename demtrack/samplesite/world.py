@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = [
     "ANCHOR",
@@ -138,7 +139,7 @@ class World:
     buildings: tuple[Building, ...]
     trees: tuple[Tree, ...]
 
-    def ground_z(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    def ground_z(self, x: ArrayLike, y: ArrayLike) -> np.ndarray:
         """Bare-earth elevation (m): a hill falling from the north-west down to the parking lot."""
         x = np.asarray(x, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
@@ -155,7 +156,7 @@ class World:
         lot_level = 12.0 + 10.0 * np.tanh(((py0 + py1) / 2 - (px0 + px1) / 2) / 120.0) - 3.0
         return z * (1 - inside) + lot_level * inside
 
-    def building_z(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    def building_z(self, x: ArrayLike, y: ArrayLike) -> np.ndarray:
         """Roof elevation where a building stands, NaN elsewhere."""
         x = np.asarray(x, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
@@ -167,7 +168,7 @@ class World:
             out = np.where(inside, roof, out)
         return out
 
-    def crown_z(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    def crown_z(self, x: ArrayLike, y: ArrayLike) -> np.ndarray:
         """Top of the tree crowns (m), NaN where no crown is overhead."""
         x = np.asarray(x, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
@@ -182,11 +183,11 @@ class World:
             out = np.fmax(out, z)
         return out
 
-    def surface_z(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    def surface_z(self, x: ArrayLike, y: ArrayLike) -> np.ndarray:
         """First-return surface (m): the highest of ground, roof and crown."""
         return np.fmax(np.fmax(self.ground_z(x, y), self.building_z(x, y)), self.crown_z(x, y))
 
-    def road_distance(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    def road_distance(self, x: ArrayLike, y: ArrayLike) -> np.ndarray:
         """Horizontal distance to the nearest road centre line (m)."""
         import shapely
 
@@ -196,7 +197,7 @@ class World:
         lines = shapely.multilinestrings([shapely.linestrings(p) for p in self.roads.values()])
         return shapely.distance(pts, lines).reshape(np.shape(x))
 
-    def in_parking(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    def in_parking(self, x: ArrayLike, y: ArrayLike) -> np.ndarray:
         """Tell whether each point lies on the parking lot's paved area."""
         px0, px1, py0, py1 = PARKING
         return (x >= px0) & (x <= px1) & (y >= py0) & (y <= py1)
