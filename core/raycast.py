@@ -209,9 +209,7 @@ class RayCaster:
         first = mode == "first"
         max_hits = 1 if first else int(max_hits)
         n = len(o)
-        # At least three columns in mode "all": a ray re-walked later keeps there the
-        # stretch and start level of its first-pass walk (see cast_kernel).
-        cap = 1 if first else max(3, min(_FIRST_PASS_HITS, max_hits))
+        cap = 1 if first else min(_FIRST_PASS_HITS, max_hits)
         buf = np.empty((n, cap), np.float64)
         counts = np.empty(n, np.int64)
         status = np.empty(n, np.int8)
@@ -244,12 +242,12 @@ class RayCaster:
         # Hits that fit the first-pass buffer are copied (with their points); the few
         # rays with more are re-walked straight into their CSR slots.
         _k.gather_hits_kernel(buf, counts, offsets, o, d, range_m, points)
+        del buf
         if not first:
             big = np.flatnonzero(counts > cap).astype(np.int64)
             if len(big):
-                _k.cast_all_refill_kernel(*args, max_hits, big, buf, offsets, range_m)
+                _k.cast_all_refill_kernel(*args, max_hits, big, offsets, range_m)
                 _k.hit_points_kernel(o, d, big, offsets, range_m, points)
-        del buf
         return RayHits(offsets, range_m, points, status, crossed, truncated)
 
 

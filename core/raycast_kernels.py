@@ -55,14 +55,6 @@ OUTSIDE = 4
 
 #: Rays per block handed out round-robin to threads (coherent neighbours share a block).
 BLOCK = 64
-#: Rays per packet: consecutive rays with one origin (a camera's neighbouring pixels) are
-#: first cleared together, over the ranges where the whole packet is provably above (or,
-#: at the far end, below) every node of the pyramid its footprint touches.
-PACKET = 16
-#: Coarsest level a walk starts at after its packet was cleared near the surface.
-START_LEVEL = 2
-#: A start-level cap that caps nothing.
-LEVELS_ALL = 64
 #: Slack (m of range) on each side of a patch's stretch when accepting a root, so a root
 #: exactly on a patch edge, rounded to either side, is found by at least one patch.
 ROOT_WINDOW_M = 1e-6
@@ -284,116 +276,6 @@ def _solve_at(elev, iy, ix, gx0, gy0, kx, ky, uz, t0, z_t0):  # pragma: no cover
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _box_nodes(
-    nodes, lvl_off, lvl_shape, pcols, prows, x_lo, x_hi, y_lo, y_hi
-):  # pragma: no cover - numba
-    """Max and min of the pyramid nodes covering grid box ``[x_lo, x_hi] x [y_lo, y_hi]``.
-
-    Picks the finest stored level where the box's patches fall in at most 2 x 2 nodes.
-    """
-    top = lvl_off.shape[0]
-    # Patches the box touches, padded a little against rounding, clamped to the grid.
-    cx0 = min(max(int(math.floor(x_lo - 1e-6)), 0), pcols - 1)
-    cx1 = min(max(int(math.floor(x_hi + 1e-6)), 0), pcols - 1)
-    cy0 = min(max(int(math.floor(y_lo - 1e-6)), 0), prows - 1)
-    cy1 = min(max(int(math.floor(y_hi + 1e-6)), 0), prows - 1)
-    lv = 1
-    while lv < top and ((cx1 >> lv) - (cx0 >> lv) > 1 or (cy1 >> lv) - (cy0 >> lv) > 1):
-        lv += 1
-    off = lvl_off[lv - 1]
-    cols = lvl_shape[lv - 1, 1]
-    a0 = cx0 >> lv
-    a1 = cx1 >> lv
-    b0 = cy0 >> lv
-    b1 = cy1 >> lv
-    k00 = off + b0 * cols + a0
-    k01 = off + b0 * cols + a1
-    k10 = off + b1 * cols + a0
-    k11 = off + b1 * cols + a1
-    hi = max(max(nodes[k00, 0], nodes[k01, 0]), max(nodes[k10, 0], nodes[k11, 0]))
-    lo = min(min(nodes[k00, 1], nodes[k01, 1]), min(nodes[k10, 1], nodes[k11, 1]))
-    return np.float64(hi), np.float64(lo)
-
-
-@njit(cache=True, error_model="numpy")
-def _packet_clear(
-    nodes,
-    lvl_off,
-    lvl_shape,
-    pcols,
-    prows,
-    margin,
-    gx0,
-    gy0,
-    z0,
-    kx_lo,
-    kx_hi,
-    ky_lo,
-    ky_hi,
-    uz_lo,
-    uz_hi,
-    t_a,
-    t_end,
-):  # pragma: no cover - numba
-    """Ranges ``(t_lo, t_hi)`` such that no ray of a packet can cross the surface outside.
-
-    The packet's rays share the origin ``(gx0, gy0, z0)`` (grid coordinates, m) and have
-    per-axis slopes within ``[kx_lo, kx_hi]`` etc.; over a range interval ``[t0, t1]``
-    (``t0 >= 0``) they lie in the box spanned by the extreme slopes at ``t0`` and ``t1``.
-    Over ``[t_a, t_lo]`` the whole box is above the max of the nodes covering it (no
-    crossing, no hole: holes are ``+inf`` maxima), over ``[t_hi, t_end]`` below their min
-    (no crossing from above, no hole either). Both ends grow by doubling steps and stop
-    once a step of about two patches fails.
-    """
-    kmax = max(max(abs(kx_lo), abs(kx_hi)), max(abs(ky_lo), abs(ky_hi)))
-    span = t_end - t_a
-    dt_min = 2.0 / kmax if kmax > 0.0 else span
-    dt_min = max(dt_min, span * (1.0 / 4096.0))
-    # Forward: the packet is entirely above the terrain it passes over.
-    t = t_a
-    dt = span
-    for _ in range(48):
-        if t >= t_end:
-            break
-        t1 = min(t + dt, t_end)
-        x_lo = gx0 + min(t * kx_lo, t1 * kx_lo)
-        x_hi = gx0 + max(t * kx_hi, t1 * kx_hi)
-        y_lo = gy0 + min(t * ky_lo, t1 * ky_lo)
-        y_hi = gy0 + max(t * ky_hi, t1 * ky_hi)
-        z_lo = z0 + min(t * uz_lo, t1 * uz_lo)
-        hi, lo = _box_nodes(nodes, lvl_off, lvl_shape, pcols, prows, x_lo, x_hi, y_lo, y_hi)
-        if z_lo - margin > hi:
-            t = t1
-            dt *= 2.0
-        elif dt <= dt_min:
-            break
-        else:
-            dt *= 0.5
-    t_lo = t
-    # Backward from the far end: the packet is entirely below the terrain.
-    t = t_end
-    dt = span
-    for _ in range(48):
-        if t <= t_lo:
-            break
-        t0 = max(t - dt, t_lo)
-        x_lo = gx0 + min(t0 * kx_lo, t * kx_lo)
-        x_hi = gx0 + max(t0 * kx_hi, t * kx_hi)
-        y_lo = gy0 + min(t0 * ky_lo, t * ky_lo)
-        y_hi = gy0 + max(t0 * ky_hi, t * ky_hi)
-        z_hi = z0 + max(t0 * uz_hi, t * uz_hi)
-        hi, lo = _box_nodes(nodes, lvl_off, lvl_shape, pcols, prows, x_lo, x_hi, y_lo, y_hi)
-        if z_hi + margin < lo:
-            t = t0
-            dt *= 2.0
-        elif dt <= dt_min:
-            break
-        else:
-            dt *= 0.5
-    return t_lo, max(t, t_lo)
-
-
-@njit(cache=True, error_model="numpy", inline="always")
 def _walk(
     elev,
     nodes,
@@ -413,7 +295,6 @@ def _walk(
     cap,
     max_count,
     first_only,
-    start_level,
 ):  # pragma: no cover - numba
     """Walk one clipped ray; store up to ``cap`` hit ranges in ``hits[base:]``.
 
@@ -439,7 +320,7 @@ def _walk(
     foot = (t_end - t_a) * max(abs(kx), abs(ky))
     # The largest level with 2**(level - 1) <= 0.25 foot + 2, in [1, top]: frexp's
     # exponent is floor(log2(v)) + 1.
-    level = max(1, min(min(top, start_level), math.frexp(0.25 * foot + 2.0)[1]))
+    level = max(1, min(top, math.frexp(0.25 * foot + 2.0)[1]))
     fx = 1 if kx > 0.0 else 0
     fy = 1 if ky > 0.0 else 0
     sx = 1 if kx > 0.0 else -1
@@ -603,156 +484,63 @@ def cast_kernel(
     n = origins.shape[0]
     cap = buf.shape[1]
     hits = buf.reshape(buf.size)
-    nrows, ncols = elev.shape
     nblocks = (n + BLOCK - 1) // BLOCK
     # Block-interleaved: thread t takes blocks t, t + T, ... so coherent runs of rays
     # (one camera's pixels) are shared by all threads.
     for th in prange(nthreads):
-        # Per-packet scratch: clipped range and slopes of each ray.
-        pk = np.empty((7, PACKET), np.float64)
         for blk in range(th, nblocks, nthreads):
-            for p0 in range(blk * BLOCK, min(n, (blk + 1) * BLOCK), PACKET):
-                p1 = min(n, min((blk + 1) * BLOCK, p0 + PACKET))
-                # Same origin for all the packet's walked rays (bitwise), and their
-                # slope and range bounds.
-                same = True
-                walked = 0
-                kx_lo = np.inf
-                kx_hi = -np.inf
-                ky_lo = np.inf
-                ky_hi = -np.inf
-                uz_lo = np.inf
-                uz_hi = -np.inf
-                t_lo = np.inf
-                t_hi = -np.inf
-                pgx0 = 0.0
-                pgy0 = 0.0
-                i0 = p0
-                for i in range(p0, p1):
-                    st, gx0, gy0, kx, ky, uz, t_a, t_end = _prepare(
-                        elev,
-                        nodes,
-                        lvl_off,
-                        lvl_shape,
-                        x_min,
-                        y_max,
-                        cell,
-                        z_min,
-                        z_max,
-                        margin,
-                        origins[i, 0],
-                        origins[i, 1],
-                        origins[i, 2],
-                        directions[i, 0],
-                        directions[i, 1],
-                        directions[i, 2],
-                        max_range[i],
-                    )
-                    crossed[i] = False
-                    truncated[i] = False
-                    counts[i] = 0
+            for i in range(blk * BLOCK, min(n, (blk + 1) * BLOCK)):
+                st, gx0, gy0, kx, ky, uz, t_a, t_end = _prepare(
+                    elev,
+                    nodes,
+                    lvl_off,
+                    lvl_shape,
+                    x_min,
+                    y_max,
+                    cell,
+                    z_min,
+                    z_max,
+                    margin,
+                    origins[i, 0],
+                    origins[i, 1],
+                    origins[i, 2],
+                    directions[i, 0],
+                    directions[i, 1],
+                    directions[i, 2],
+                    max_range[i],
+                )
+                crossed[i] = False
+                truncated[i] = False
+                counts[i] = 0
+                if st != HIT:
                     status[i] = st
-                    j = i - p0
-                    pk[0, j] = kx
-                    pk[1, j] = ky
-                    pk[2, j] = uz
-                    pk[3, j] = t_a
-                    pk[4, j] = t_end
-                    pk[5, j] = gx0
-                    pk[6, j] = gy0
-                    if st != HIT:
-                        continue
-                    if walked == 0:
-                        pgx0 = gx0
-                        pgy0 = gy0
-                        i0 = i
-                    elif (
-                        origins[i, 0] != origins[i0, 0]
-                        or origins[i, 1] != origins[i0, 1]
-                        or origins[i, 2] != origins[i0, 2]
-                    ):
-                        same = False
-                    walked += 1
-                    kx_lo = min(kx_lo, kx)
-                    kx_hi = max(kx_hi, kx)
-                    ky_lo = min(ky_lo, ky)
-                    ky_hi = max(ky_hi, ky)
-                    uz_lo = min(uz_lo, uz)
-                    uz_hi = max(uz_hi, uz)
-                    t_lo = min(t_lo, t_a)
-                    t_hi = max(t_hi, t_end)
-                if walked == 0:
                     continue
-                c_lo = -np.inf
-                c_hi = np.inf
-                if same and walked > 1:
-                    c_lo, c_hi = _packet_clear(
-                        nodes,
-                        lvl_off,
-                        lvl_shape,
-                        ncols - 1,
-                        nrows - 1,
-                        margin,
-                        pgx0,
-                        pgy0,
-                        origins[i0, 2],
-                        kx_lo,
-                        kx_hi,
-                        ky_lo,
-                        ky_hi,
-                        uz_lo,
-                        uz_hi,
-                        t_lo,
-                        t_hi,
-                    )
-                # A cleared stretch ends near the surface: start the walks low (they
-                # climb as they go) rather than descend from the footprint's level.
-                c_lo = -np.inf if c_hi < -1.0 else -np.inf
-                c_hi = np.inf if c_lo < 0 else c_hi
-                lvl0 = START_LEVEL if c_lo > t_lo else LEVELS_ALL
-                for i in range(p0, p1):
-                    if status[i] != HIT:
-                        continue
-                    j = i - p0
-                    # No crossing and no hole outside [c_lo, c_hi]: walk only that part.
-                    t_a = max(pk[3, j], c_lo)
-                    t_end = min(pk[4, j], c_hi)
-                    cnt = 0
-                    cr = False
-                    if t_a <= t_end:
-                        cnt, cr = _walk(
-                            elev,
-                            nodes,
-                            lvl_off,
-                            lvl_shape,
-                            margin,
-                            pk[5, j],
-                            pk[6, j],
-                            origins[i, 2],
-                            pk[0, j],
-                            pk[1, j],
-                            pk[2, j],
-                            t_a,
-                            t_end,
-                            hits,
-                            i * cap,
-                            cap,
-                            max_hits,
-                            first_only,
-                            lvl0,
-                        )
-                    crossed[i] = cr
-                    if cnt > max_hits:
-                        truncated[i] = True
-                        cnt = max_hits
-                    if cnt > cap:
-                        # Re-walked later over the same stretch (cast_all_refill_kernel);
-                        # its first-pass hits are not used, so keep the stretch there.
-                        hits[i * cap] = t_a
-                        hits[i * cap + 1] = t_end
-                        hits[i * cap + 2] = lvl0
-                    counts[i] = cnt
-                    status[i] = HIT if cnt > 0 else MISS
+                cnt, cr = _walk(
+                    elev,
+                    nodes,
+                    lvl_off,
+                    lvl_shape,
+                    margin,
+                    gx0,
+                    gy0,
+                    origins[i, 2],
+                    kx,
+                    ky,
+                    uz,
+                    t_a,
+                    t_end,
+                    hits,
+                    i * cap,
+                    cap,
+                    max_hits,
+                    first_only,
+                )
+                crossed[i] = cr
+                if cnt > max_hits:
+                    truncated[i] = True
+                    cnt = max_hits
+                counts[i] = cnt
+                status[i] = HIT if cnt > 0 else MISS
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
@@ -772,16 +560,10 @@ def cast_all_refill_kernel(
     max_range,
     max_hits,
     rays,
-    buf,
     offsets,
     range_out,
 ):  # pragma: no cover - numba
-    """Re-walk the rays ``rays`` (int64) writing all their hits into ``range_out`` (CSR).
-
-    ``buf[i, :3]`` holds the stretch ``(t_a, t_end)`` and start level the first pass
-    walked ray ``i`` with (see :func:`cast_kernel`), so the re-walk finds the same
-    crossings.
-    """
+    """Re-walk the rays ``rays`` (int64) writing all their hits into ``range_out`` (CSR)."""
     for q in prange(rays.shape[0]):
         i = rays[q]
         st, gx0, gy0, kx, ky, uz, t_a, t_end = _prepare(
@@ -815,14 +597,13 @@ def cast_all_refill_kernel(
             kx,
             ky,
             uz,
-            buf[i, 0],
-            buf[i, 1],
+            t_a,
+            t_end,
             range_out,
             offsets[i],
             offsets[i + 1] - offsets[i],
             max_hits,
             False,
-            int(buf[i, 2]),
         )
 
 
