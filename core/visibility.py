@@ -1,0 +1,183 @@
+"""Viewsheds and coverage: which DEM cells a camera can see, and how many cameras see each.
+
+A cell is visible from a camera when the straight line from the optical centre to a target
+point ``target_height_m`` above the cell's centre meets no terrain on the way (the DEM
+surface, with its trees and roofs, occludes), lies within the maximum range and, depending
+on the mode, within the camera's current field of view (``"fov"``) or anywhere the pan-tilt
+head can point (``"reachable"``: a pan interval and a tilt interval widened by half the
+field of view). The sight lines are cast with :func:`~demtrack.core.raycast.cast_rays`, so
+"meets the terrain" means exactly what geolocation means by it. Earth curvature and
+refraction optionally lower distant targets by ``d^2 (1 - k) / (2 R)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from .camera import Camera
+from .dem import Dem
+from .errors import CameraError
+from .raycast import cast_rays
+
+__all__ = [
+    "EARTH_RADIUS_M",
+    "REFRACTION_K",
+    "BlindSpot",
+    "PanTiltLimits",
+    "blind_spots",
+    "viewshed",
+]
+
+EARTH_RADIUS_M = 6_371_000.0
+#: Standard coefficient of atmospheric refraction.
+REFRACTION_K = 0.13
+#: A sight line may touch the terrain this close to its target (fraction of the distance
+#: plus an absolute part, m): the target stands on that very surface.
+_TARGET_TOL_REL, _TARGET_TOL_M = 1e-3, 0.05
+
+
+@dataclass(frozen=True)
+class PanTiltLimits:
+    """Where a head can point: pan interval (clockwise from its mount yaw) and tilt interval.
+
+    ``pan_min_deg = -180, pan_max_deg = 180`` is a full circle.
+    """
+
+    pan_min_deg: float = -180.0
+    pan_max_deg: float = 180.0
+    tilt_min_deg: float = -90.0
+    tilt_max_deg: float = 30.0
+
+
+@dataclass(frozen=True)
+class BlindSpot:
+    """A connected area no camera sees: size and where it is (site frame, m)."""
+
+    area_m2: float
+    centroid_e_m: float
+    centroid_n_m: float
+    bbox: tuple[float, float, float, float]
+
+
+def _half_fov_deg(camera: Camera) -> tuple[float, float]:
+    intr = camera.intrinsics
+    hx = np.degrees(np.arctan((intr.width / 2) / intr.fx))
+    hy = np.degrees(np.arctan((intr.height / 2) / intr.fy))
+    return float(hx), float(hy)
+
+
+def _reachable(
+    camera: Camera, mount_yaw_deg: float, limits: PanTiltLimits, d: np.ndarray
+) -> np.ndarray:
+    """Sight directions ``d`` (n, 3) within the head's pan/tilt range widened by the FOV."""
+    half_x, half_y = _half_fov_deg(camera)
+    az = np.degrees(np.arctan2(d[:, 0], d[:, 1]))
+    el = np.degrees(np.arctan2(d[:, 2], np.hypot(d[:, 0], d[:, 1])))
+    ok = (el >= limits.tilt_min_deg - half_y) & (el <= limits.tilt_max_deg + half_y)
+    span = limits.pan_max_deg - limits.pan_min_deg
+    if span + 2 * half_x < 360.0:
+        rel = (az - mount_yaw_deg - limits.pan_min_deg + half_x) % 360.0
+        ok &= rel <= span + 2 * half_x
+    return ok
+
+
+def viewshed(
+    dem: Dem,
+    camera: Camera,
+    *,
+    mode: str = "fov",
+    target_height_m: float = 1.0,
+    max_range_m: float = 1000.0,
+    mount_yaw_deg: float = 0.0,
+    limits: PanTiltLimits | None = None,
+    curvature: bool = False,
+) -> np.ndarray:
+    """Boolean raster on ``dem.grid``: True where the camera sees the target point.
+
+    Parameters
+    ----------
+    dem : Dem
+    camera : Camera
+        Position (and, for ``mode="fov"``, pointing and intrinsics).
+    mode : {"fov", "reachable"}
+        Current field of view, or anywhere within the pan-tilt ``limits``.
+    target_height_m : float
+        Height of the target point above the surface (m): 0 for the ground itself, about
+        1 m for the middle of a person or a car.
+    max_range_m : float
+        Cells farther than this (3-D distance) are not seen.
+    mount_yaw_deg : float
+        Azimuth at pan 0 (``mode="reachable"`` only).
+    limits : PanTiltLimits, optional
+        Pan/tilt range (``mode="reachable"``); full circle by default.
+    curvature : bool
+        Lower targets by earth curvature less standard refraction.
+
+    Returns
+    -------
+    ndarray, bool, shape ``dem.grid.shape``
+        False also where the DEM has no data.
+    """
+    if mode not in ("fov", "reachable"):
+        raise CameraError(f"unknown viewshed mode {mode!r}; choose 'fov' or 'reachable'")
+    if not (np.isfinite(max_range_m) and max_range_m > 0):
+        raise CameraError(f"max_range_m must be positive, got {max_range_m!r}")
+    x, y = dem.grid.centres()
+    z = dem.elevation.astype(np.float64) + float(target_height_m)
+    c = np.asarray(camera.position_enu, dtype=np.float64)
+    horiz = np.hypot(x - c[0], y - c[1])
+    if curvature:
+        z = z - horiz**2 * (1.0 - REFRACTION_K) / (2.0 * EARTH_RADIUS_M)
+    targets = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
+    d = targets - c
+    dist = np.linalg.norm(d, axis=1)
+    cand = np.isfinite(dist) & (dist <= max_range_m) & (dist > 0)
+    if mode == "fov":
+        idx = np.flatnonzero(cand)
+        u, v, front = camera.project(targets[idx])
+        inside = front & camera.in_image(np.nan_to_num(u, nan=-1e9), np.nan_to_num(v, nan=-1e9))
+        cand[idx[~inside]] = False
+    else:
+        cand &= _reachable(camera, mount_yaw_deg, limits or PanTiltLimits(), d)
+    idx = np.flatnonzero(cand)
+    seen = np.zeros(len(targets), bool)
+    if len(idx):
+        reach = dist[idx] * (1.0 - _TARGET_TOL_REL) - _TARGET_TOL_M
+        hits = cast_rays(
+            dem, np.broadcast_to(c, (len(idx), 3)), d[idx], np.maximum(reach, 0.0), mode="first"
+        )
+        seen[idx] = hits.counts == 0
+    return seen.reshape(dem.grid.shape)
+
+
+def blind_spots(
+    coverage_count: np.ndarray, dem: Dem, *, min_area_m2: float = 0.0
+) -> list[BlindSpot]:
+    """Connected areas (8-neighbour) with zero coverage and data, largest first."""
+    blind = (np.asarray(coverage_count) == 0) & ~dem.nodata
+    labels, n = ndimage.label(blind, structure=np.ones((3, 3), bool))
+    if n == 0:
+        return []
+    cell_area = dem.grid.cell_m**2
+    index = np.arange(1, n + 1)
+    sizes = ndimage.sum(blind, labels, index) * cell_area
+    centres = ndimage.center_of_mass(blind, labels, index)
+    boxes = ndimage.find_objects(labels)
+    out = []
+    for k in np.argsort(-sizes):
+        if sizes[k] < min_area_m2:
+            break
+        gy, gx = centres[k]
+        e, n_ = dem.grid.from_grid(np.array(gx), np.array(gy))
+        rs, cs = boxes[k]
+        x0, y1 = dem.grid.from_grid(np.array(cs.start - 0.5), np.array(rs.start - 0.5))
+        x1, y0 = dem.grid.from_grid(np.array(cs.stop - 0.5), np.array(rs.stop - 0.5))
+        out.append(
+            BlindSpot(
+                float(sizes[k]), float(e), float(n_), (float(x0), float(y0), float(x1), float(y1))
+            )
+        )
+    return out
