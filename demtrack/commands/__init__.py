@@ -2,9 +2,29 @@
 
 from __future__ import annotations
 
-from . import bench, build_dem, calibrate, geolocate, sample_site
+from . import (
+    bench,
+    build_dem,
+    calibrate,
+    evaluate,
+    geolocate,
+    sample_site,
+    scenario,
+    track,
+    viewshed,
+)
 
 __all__ = ["COMMANDS"]
 
 #: Modules with ``register(subparsers)``, in help order.
-COMMANDS = (sample_site, geolocate, build_dem, calibrate, bench)
+COMMANDS = (
+    sample_site,
+    geolocate,
+    build_dem,
+    calibrate,
+    scenario,
+    track,
+    evaluate,
+    viewshed,
+    bench,
+)

@@ -41,10 +41,15 @@ class CameraSpec:
     k1: float = -0.04
 
 
+# Pointing: cam1 (wide) sees the loop's west and south sides and the top of the spur, cam2
+# (wide) the spur and the parking lot, cam3 (on a 30 m mast, high enough to look down on
+# the north side over the crowns) the north, west and south sides; the east side is left
+# unseen, so a vehicle coming up the spur and turning north crosses a hand-off gap of a
+# few seconds (as in the VSAM experiment).
 SAMPLE_CAMERAS = (
-    CameraSpec("cam1", "Museum roof", -33.0, 105.0, 8.0, (-62.0, -40.0), 14.7, 62.0),
-    CameraSpec("cam2", "Visitor centre roof", 73.0, -61.0, 5.0, (96.0, -100.0), -148.7, 70.0),
-    CameraSpec("cam3", "East mast", 142.0, 58.0, 14.0, (40.0, 72.0), -62.1, 58.0),
+    CameraSpec("cam1", "Museum roof", -33.0, 105.0, 8.0, (-40.0, -40.0), 14.7, 80.0),
+    CameraSpec("cam2", "Visitor centre roof", 73.0, -61.0, 5.0, (88.0, -90.0), -148.7, 90.0),
+    CameraSpec("cam3", "East mast", 142.0, 58.0, 30.0, (40.0, 17.0), -62.1, 76.0),
 )
 
 

@@ -230,3 +230,20 @@ def test_build_dem_from_laz_in_utm_lands_in_the_site_frame(
     # Local up of a point 10 m above the anchor's ellipsoid height, <= 10 m away: 10 m
     # minus the earth's curvature drop (d^2 / 2R < 0.01 mm).
     np.testing.assert_allclose(dem.elevation[dem.count > 0], 10.0, atol=2e-3)
+
+
+def test_viewshed_reports_coverage_and_writes_a_raster(capsys, tmp_path, sample_site_dir):
+    import rasterio
+
+    from demtrack.core.visibility import viewshed
+
+    out_tif = tmp_path / "cov.tif"
+    status, out, _ = run(capsys, "viewshed", "--site", str(sample_site_dir), "-o", str(out_tif))
+    assert status == 0 and "seen by >= 1 sensor" in out and "blind spots" in out
+    site = load_site(sample_site_dir)
+    with rasterio.open(out_tif) as src:
+        count, cam1 = src.read(1), src.read(2)
+        assert src.descriptions[1] == "seen_by_cam1"
+    ref = viewshed(site.dem, site.sensor("cam1").camera, target_height_m=1.0)
+    np.testing.assert_array_equal(cam1.astype(bool), ref)
+    assert count.max() <= len(site.sensors) and (count >= 1).any()

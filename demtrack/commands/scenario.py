@@ -1,0 +1,93 @@
+"""``demtrack scenario``: write a sample-site scenario's detections (and its ground truth)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from demtrack.core.detections import write_detections_csv, write_detections_jsonl
+from demtrack.core.errors import InputFileError
+from demtrack.core.site import load_site
+from demtrack.samplesite.scenarios import (
+    SCENARIOS,
+    ScenarioParams,
+    make_scenario,
+    write_truth_json,
+)
+
+from .common import add_site_argument
+
+__all__ = ["add_scenario_parameters", "params_from_args", "register"]
+
+
+def add_scenario_parameters(p: argparse.ArgumentParser) -> None:
+    """Add the detection-noise options shared by ``scenario`` and ``evaluate``."""
+    d = ScenarioParams()
+    p.add_argument(
+        "--noise-px",
+        type=float,
+        default=d.noise_px,
+        metavar="PX",
+        help=f"1-sigma box-edge noise (default {d.noise_px})",
+    )
+    p.add_argument(
+        "--p-miss",
+        type=float,
+        default=d.p_miss,
+        metavar="P",
+        help=f"missed-detection probability (default {d.p_miss})",
+    )
+    p.add_argument(
+        "--false-alarms",
+        type=float,
+        default=d.false_alarm_rate,
+        metavar="RATE",
+        help=f"mean false alarms per camera frame (default {d.false_alarm_rate})",
+    )
+    p.add_argument("--seed", type=int, default=d.seed, help=f"random seed (default {d.seed})")
+
+
+def params_from_args(args: argparse.Namespace) -> ScenarioParams:
+    """The :class:`ScenarioParams` the options ask for."""
+    return ScenarioParams(
+        noise_px=args.noise_px,
+        p_miss=args.p_miss,
+        false_alarm_rate=args.false_alarms,
+        seed=args.seed,
+    )
+
+
+def _run(args: argparse.Namespace) -> int:
+    out = Path(args.output)
+    suffix = out.suffix.lower()
+    if suffix not in (".csv", ".jsonl", ".ndjson"):
+        raise InputFileError(f"unknown detection file type {suffix!r} (use .csv or .jsonl)")
+    params = params_from_args(args)
+    site = load_site(args.site)
+    sc = make_scenario(site, args.name, params)
+    if suffix == ".csv":
+        write_detections_csv(out, sc.detections)
+    else:
+        write_detections_jsonl(out, sc.detections)
+    if args.truth is not None:
+        write_truth_json(args.truth, sc)
+    s = sc.stats
+    print(
+        f"{sc.name}: {len(sc.detections)} detections from {s['frames']} frames"
+        f" ({s['detected']} of targets, {s['partly_hidden']} partly hidden, {s['hidden']} hidden,"
+        f" {s['missed']} missed, {s['false_alarms']} false alarms) -> {out}"
+    )
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``scenario`` command."""
+    p = sub.add_parser("scenario", help="simulate detections of a scenario on the sample site")
+    add_site_argument(p)
+    p.add_argument("--name", required=True, choices=sorted(SCENARIOS), help="scenario")
+    p.add_argument(
+        "-o", "--output", required=True, metavar="FILE", help="detections file (.jsonl or .csv)"
+    )
+    p.add_argument("--truth", metavar="FILE", help="also write the ground truth (JSON)")
+    add_scenario_parameters(p)
+    p.set_defaults(func=_run)

@@ -1,0 +1,85 @@
+"""``demtrack track``: detections file -> geolocated fixes -> tracks (GeoJSON, CSV, GPX)."""
+
+from __future__ import annotations
+
+import argparse
+from datetime import UTC, datetime
+from pathlib import Path
+
+from demtrack.core.detections import read_detections
+from demtrack.core.errors import InputFileError
+from demtrack.core.fix_builder import build_fixes, sensor_sizes
+from demtrack.core.site import load_site
+from demtrack.core.track_io import write_tracks_csv, write_tracks_geojson, write_tracks_gpx
+from demtrack.core.tracking import METHODS, run_tracker
+
+from .common import add_site_argument
+
+__all__ = ["register"]
+
+SUFFIXES = (".geojson", ".json", ".csv", ".gpx")
+
+
+def _epoch(text: str | None) -> datetime | None:
+    if text is None:
+        return None
+    try:
+        when = datetime.fromisoformat(text.replace("Z", "+00:00"))
+    except ValueError:
+        raise InputFileError(f"--epoch must be an ISO 8601 time, got {text!r}") from None
+    return when if when.tzinfo is not None else when.replace(tzinfo=UTC)
+
+
+def _run(args: argparse.Namespace) -> int:
+    out = Path(args.output)
+    suffix = out.suffix.lower()
+    if suffix not in SUFFIXES:
+        raise InputFileError(f"unknown track file type {suffix!r} (use {', '.join(SUFFIXES)})")
+    epoch = _epoch(args.epoch)
+    site = load_site(args.site)
+    detections, ingest = read_detections(args.detections, sensors=sensor_sizes(site))
+    print(ingest.summary())
+    fixes, report = build_fixes(site, detections)
+    print(report.summary())
+    tracks = run_tracker(fixes, args.method, roads=site.roads)
+    frame = site.frame
+
+    def to_geodetic(e: float, n: float, u: float) -> tuple[float, float, float]:
+        lat, lon, h = frame.to_geodetic(e, n, u)
+        return float(lat), float(lon), float(h)
+
+    if suffix == ".csv":
+        write_tracks_csv(out, tracks, to_geodetic, epoch=epoch)
+    elif suffix == ".gpx":
+        # GPX needs absolute times: without --epoch, t = 0 is the start of 2000-01-01 UTC.
+        write_tracks_gpx(out, tracks, to_geodetic, epoch=epoch or datetime(2000, 1, 1, tzinfo=UTC))
+    else:
+        write_tracks_geojson(out, tracks, to_geodetic, epoch=epoch)
+    n_gaps = sum(len(t.gaps) for t in tracks)
+    print(f"{args.method}: {len(tracks)} track(s), {n_gaps} gap(s) -> {out}")
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``track`` command."""
+    p = sub.add_parser("track", help="track objects from a detections file")
+    add_site_argument(p)
+    p.add_argument(
+        "--detections",
+        required=True,
+        metavar="FILE",
+        help="detections (.csv or .jsonl; see docs/trajectories.md)",
+    )
+    p.add_argument(
+        "--method",
+        choices=list(METHODS),
+        default="multi-hypothesis-road",
+        help="tracking method (default multi-hypothesis-road)",
+    )
+    p.add_argument(
+        "-o", "--output", required=True, metavar="FILE", help="tracks file: .geojson, .csv or .gpx"
+    )
+    p.add_argument(
+        "--epoch", metavar="ISO8601", help="UTC time of t = 0 s, for absolute times in the output"
+    )
+    p.set_defaults(func=_run)
