@@ -133,7 +133,7 @@ class Zone:
     """A named polygon in the site frame (m)."""
 
     name: str
-    polygon: shapely.Polygon
+    polygon: shapely.Polygon | shapely.MultiPolygon
 
 
 def _ids(trajectories: Sequence[Any]) -> list[int]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from . import (
+    activity,
     bench,
     build_dem,
     calibrate,
@@ -26,5 +27,6 @@ COMMANDS = (
     track,
     evaluate,
     viewshed,
+    activity,
     bench,
 )

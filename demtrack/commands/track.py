@@ -9,13 +9,13 @@ from pathlib import Path
 from demtrack.core.detections import read_detections
 from demtrack.core.errors import InputFileError
 from demtrack.core.fix_builder import build_fixes, sensor_sizes
-from demtrack.core.site import load_site
+from demtrack.core.site import Site, load_site
 from demtrack.core.track_io import write_tracks_csv, write_tracks_geojson, write_tracks_gpx
-from demtrack.core.tracking import METHODS, run_tracker
+from demtrack.core.tracking import METHODS, Track, run_tracker
 
 from .common import add_site_argument
 
-__all__ = ["register"]
+__all__ = ["register", "track_detections"]
 
 SUFFIXES = (".geojson", ".json", ".csv", ".gpx")
 
@@ -30,6 +30,15 @@ def _epoch(text: str | None) -> datetime | None:
     return when if when.tzinfo is not None else when.replace(tzinfo=UTC)
 
 
+def track_detections(site: Site, detections_path: Path, method: str) -> list[Track]:
+    """Read detections, geolocate them into fixes and track; prints what was skipped."""
+    detections, ingest = read_detections(detections_path, sensors=sensor_sizes(site))
+    print(ingest.summary())
+    fixes, report = build_fixes(site, detections)
+    print(report.summary())
+    return run_tracker(fixes, method, roads=site.roads)
+
+
 def _run(args: argparse.Namespace) -> int:
     out = Path(args.output)
     suffix = out.suffix.lower()
@@ -37,11 +46,7 @@ def _run(args: argparse.Namespace) -> int:
         raise InputFileError(f"unknown track file type {suffix!r} (use {', '.join(SUFFIXES)})")
     epoch = _epoch(args.epoch)
     site = load_site(args.site)
-    detections, ingest = read_detections(args.detections, sensors=sensor_sizes(site))
-    print(ingest.summary())
-    fixes, report = build_fixes(site, detections)
-    print(report.summary())
-    tracks = run_tracker(fixes, args.method, roads=site.roads)
+    tracks = track_detections(site, args.detections, args.method)
     frame = site.frame
 
     def to_geodetic(e: float, n: float, u: float) -> tuple[float, float, float]:

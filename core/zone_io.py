@@ -1,0 +1,71 @@
+"""Zones drawn on the map as GeoJSON polygons (RFC 7946 lon/lat) -> site-frame polygons."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import shapely
+
+from .activity import Zone
+from .errors import InputFileError
+from .geodesy import LocalFrame
+
+__all__ = ["read_zones_geojson"]
+
+
+def _ring_enu(ring: list, frame: LocalFrame, k: int) -> np.ndarray:
+    try:
+        lonlat = np.asarray(ring, dtype=np.float64)[:, :2]
+    except (TypeError, ValueError, IndexError):
+        raise InputFileError(f"zone feature {k}: malformed coordinates") from None
+    if len(lonlat) < 4 or not np.isfinite(lonlat).all():
+        raise InputFileError(f"zone feature {k}: a ring needs at least 4 finite positions")
+    # Positions at the anchor's height, as roads are (local up 0).
+    e, n, _ = frame.to_enu(lonlat[:, 1], lonlat[:, 0], np.full(len(lonlat), frame.h_m))
+    return np.column_stack([e, n])
+
+
+def read_zones_geojson(path: str | Path, frame: LocalFrame) -> list[Zone]:
+    """Read Polygon / MultiPolygon features; ``properties.name`` names each zone.
+
+    Raises
+    ------
+    InputFileError
+        Missing file, bad JSON, not a FeatureCollection, or a feature that is not a valid
+        polygon.
+    """
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise InputFileError(f"cannot read zone file {path}: {exc.strerror}") from None
+    except json.JSONDecodeError as exc:
+        raise InputFileError(f"zone file {path} is not valid JSON: {exc.msg}") from None
+    if not isinstance(doc, dict) or doc.get("type") != "FeatureCollection":
+        raise InputFileError(f"zone file {path} must be a GeoJSON FeatureCollection")
+    zones = []
+    for k, feature in enumerate(doc.get("features") or []):
+        geom = (feature or {}).get("geometry") or {}
+        name = str(((feature or {}).get("properties") or {}).get("name", f"zone {k + 1}"))
+        if geom.get("type") == "Polygon":
+            polys = [geom.get("coordinates") or []]
+        elif geom.get("type") == "MultiPolygon":
+            polys = list(geom.get("coordinates") or [])
+        else:
+            raise InputFileError(f"zone feature {k}: geometry must be a Polygon")
+        parts = []
+        for rings in polys:
+            if not rings:
+                raise InputFileError(f"zone feature {k}: empty polygon")
+            shell, holes = (
+                _ring_enu(rings[0], frame, k),
+                [_ring_enu(r, frame, k) for r in rings[1:]],
+            )
+            parts.append(shapely.Polygon(shell, holes))
+        poly = parts[0] if len(parts) == 1 else shapely.MultiPolygon(parts)
+        if not poly.is_valid:
+            raise InputFileError(f"zone feature {k} ({name}): {shapely.is_valid_reason(poly)}")
+        zones.append(Zone(name, poly))
+    return zones
