@@ -28,6 +28,7 @@ __all__ = [
     "BlindSpot",
     "PanTiltLimits",
     "blind_spots",
+    "target_visible_fraction",
     "viewshed",
 ]
 
@@ -181,3 +182,52 @@ def blind_spots(
             )
         )
     return out
+
+
+def target_visible_fraction(
+    dem: Dem,
+    camera: Camera,
+    points_enu: np.ndarray,
+    height_m: float,
+    *,
+    samples: int = 8,
+    max_range_m: float = 1000.0,
+    in_view: bool = True,
+) -> np.ndarray:
+    """How much of a standing target the camera sees, per ground point.
+
+    The target is the vertical segment from ``points_enu`` (on the ground) up to
+    ``height_m``; ``samples`` points on it (from 5 % to 100 % of the height) are tested for a
+    clear sight line and, with ``in_view``, for lying in the image.
+
+    Parameters
+    ----------
+    points_enu : ndarray, shape (n, 3)
+        Foot of each target, site frame (m).
+    height_m : float
+        Target height (about 1.7 m for a person, 1.5 m for a car).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Share of the sample points seen: 1 fully visible, 0 hidden or out of view.
+    """
+    feet = np.atleast_2d(np.asarray(points_enu, dtype=np.float64))
+    levels = np.linspace(0.05, 1.0, samples) * float(height_m)
+    pts = np.repeat(feet, samples, axis=0)
+    pts[:, 2] += np.tile(levels, len(feet))
+    c = np.asarray(camera.position_enu, dtype=np.float64)
+    d = pts - c
+    dist = np.linalg.norm(d, axis=1)
+    ok = (dist > 0) & (dist <= max_range_m)
+    if in_view:
+        u, v, front = camera.project(pts)
+        ok &= front & camera.in_image(np.nan_to_num(u, nan=-1e9), np.nan_to_num(v, nan=-1e9))
+    idx = np.flatnonzero(ok)
+    if len(idx):
+        reach = dist[idx] * (1.0 - _TARGET_TOL_REL) - _TARGET_TOL_M
+        hits = cast_rays(
+            dem, np.broadcast_to(c, (len(idx), 3)), d[idx], np.maximum(reach, 0.0), mode="first"
+        )
+        ok[idx] = hits.counts == 0
+    return ok.reshape(len(feet), samples).mean(axis=1)

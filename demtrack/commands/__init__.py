@@ -9,6 +9,7 @@ from . import (
     calibrate,
     evaluate,
     geolocate,
+    handoff,
     sample_site,
     scenario,
     track,
@@ -28,5 +29,6 @@ COMMANDS = (
     evaluate,
     viewshed,
     activity,
+    handoff,
     bench,
 )

@@ -140,3 +140,28 @@ def test_blind_spots_are_connected_areas_largest_first():
     assert spots[0].centroid_n_m == pytest.approx(y[2:6, 2:5].mean())
     assert spots[0].bbox == pytest.approx((-38.0, 34.0, -35.0, 38.0))  # cell edges
     assert len(blind_spots(count, dem, min_area_m2=5.0)) == 1
+
+
+def test_target_behind_a_wall_is_partly_then_fully_visible_as_it_grows():
+    from demtrack.core.visibility import target_visible_fraction
+
+    dem = plane()
+    z = np.array(dem.elevation)
+    x, y = dem.grid.centres()
+    z[(x > 9) & (x < 12)] = 2.0  # a 2 m wall across the view
+    dem = Dem(dem.grid, z)
+    cam = Camera.from_azimuth_tilt_roll(INTR, [0.0, 0.0, 3.0], 90.0, -5.0, 0.0)
+    foot = np.array([[30.0, 0.0, 0.0]])
+    # The sight line over the wall top (x ~ 10.5..11, z = 2) from z = 3 reaches
+    # z = 3 - (3 - 2) * 30 / d_wall at x = 30; heights above that are seen.
+    d_wall = 10.75
+    z_min = 3.0 - 1.0 * 30.0 / d_wall
+    f_short = target_visible_fraction(dem, cam, foot, 0.2)[0]
+    f_tall = target_visible_fraction(dem, cam, foot, 4.0)[0]
+    assert f_short == 0.0
+    levels = np.linspace(0.05, 1.0, 8) * 4.0
+    assert f_tall == pytest.approx(np.mean(levels > z_min), abs=1 / 8)
+    open_ground = target_visible_fraction(dem, cam, np.array([[5.0, 0.0, 0.0]]), 1.7)[0]
+    assert open_ground == 1.0
+    behind_camera = target_visible_fraction(dem, cam, np.array([[-20.0, 0.0, 0.0]]), 1.7)[0]
+    assert behind_camera == 0.0

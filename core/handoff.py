@@ -1,0 +1,299 @@
+"""Sensor hand-off: when a target leaves its camera, and which camera takes it next.
+
+The paper's geospatial frame lets one camera's target be handed to another. For a target
+at ``p_enu`` moving with ``v_enu``, :func:`predict_handoff` extrapolates its ground path
+(constant velocity, on the DEM), asks each camera how much of the standing target it would
+see at each future instant (:func:`~demtrack.core.visibility.target_visible_fraction`), and
+reports when the current camera loses it and which camera sees it next: one that already
+points there, or else a pan-tilt head with a clear line of sight, with the pan and tilt it
+should slew to so the target is centred.
+
+:func:`evaluate_handoffs` scores the predictions on ground-truth paths: how often the named
+next camera was the one that really saw the target next, and how early that was known.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+
+from .dem import Dem
+from .pantilt import wrap_deg
+from .roads import RoadNetwork
+from .site import Sensor
+from .visibility import target_visible_fraction
+
+__all__ = [
+    "HandoffPrediction",
+    "HandoffScore",
+    "evaluate_handoffs",
+    "predict_handoff",
+    "visibility_timeline",
+]
+
+
+@dataclass(frozen=True)
+class HandoffPrediction:
+    """What to expect for one target.
+
+    Attributes
+    ----------
+    current : str or None
+        The camera that sees the target now (None if none does).
+    exit_in_s : float or None
+        Seconds until the current camera loses it (None: not within the horizon).
+    next_sensor : str or None
+        The camera expected to see it next (None: none within the horizon).
+    next_in_s : float or None
+        Seconds until that camera sees it.
+    slew : bool
+        The next camera must turn to see it (it has a clear line of sight, but the target
+        will not be in its current field of view).
+    pan_deg, tilt_deg : float or None
+        Where to point the next camera's head to centre the target at acquisition.
+    acquisition_enu : ndarray, shape (3,), or None
+        Predicted ground position at acquisition.
+    """
+
+    current: str | None
+    exit_in_s: float | None
+    next_sensor: str | None
+    next_in_s: float | None
+    slew: bool = False
+    pan_deg: float | None = None
+    tilt_deg: float | None = None
+    acquisition_enu: np.ndarray | None = None
+
+
+def _along_road(
+    roads: RoadNetwork, p: np.ndarray, v: np.ndarray, times: np.ndarray, snap_m: float
+) -> np.ndarray | None:
+    """Future ground positions following the nearest road, or None if off the roads."""
+    speed = float(np.hypot(v[0], v[1]))
+    here = shapely.Point(p[0], p[1])
+    k = int(np.argmin([line.distance(here) for line in roads.lines]))
+    line = roads.lines[k]
+    if speed < 0.1 or line.distance(here) > snap_m:
+        return None
+    s0 = line.project(here)
+    ahead = line.interpolate(min(s0 + 1.0, line.length))
+    behind = line.interpolate(max(s0 - 1.0, 0.0))
+    tangent = np.array([ahead.x - behind.x, ahead.y - behind.y])
+    sign = 1.0 if tangent @ v[:2] >= 0 else -1.0
+    on = line.interpolate(s0)
+    offset = np.array([p[0] - on.x, p[1] - on.y])  # keep the lane offset
+    s = s0 + sign * speed * times
+    if line.is_closed:
+        s = np.mod(s, line.length)
+    pts = shapely.get_coordinates(shapely.line_interpolate_point(line, np.clip(s, 0, line.length)))
+    # Past either end of the line, carry on in a straight line.
+    over = np.maximum(np.where(s > line.length, s - line.length, 0), np.where(s < 0, -s, 0))
+    pts = pts + offset + over[:, None] * (sign * tangent / max(np.linalg.norm(tangent), 1e-9))
+    return pts
+
+
+def _path(
+    dem: Dem,
+    p_enu: np.ndarray,
+    v_enu: np.ndarray,
+    times: np.ndarray,
+    roads: RoadNetwork | None = None,
+    snap_m: float = 5.0,
+) -> np.ndarray:
+    p, v = np.asarray(p_enu, float), np.asarray(v_enu, float)
+    xy = _along_road(roads, p, v, times, snap_m) if roads is not None and len(roads) else None
+    if xy is None:
+        xy = p[None, :2] + times[:, None] * v[None, :2]
+    z = dem.sample(xy[:, 0], xy[:, 1])
+    return np.column_stack([xy, np.nan_to_num(z, nan=float(p[2]))])
+
+
+def visibility_timeline(
+    dem: Dem,
+    sensors: Mapping[str, Sensor],
+    points_enu: np.ndarray,
+    height_m: float,
+    *,
+    in_view: bool = True,
+    max_range_m: float = 1000.0,
+) -> dict[str, np.ndarray]:
+    """Visible fraction of the standing target at each point, per sensor."""
+    return {
+        sid: target_visible_fraction(
+            dem, s.camera, points_enu, height_m, max_range_m=max_range_m, in_view=in_view
+        )
+        for sid, s in sensors.items()
+    }
+
+
+def _first(flags: np.ndarray) -> int | None:
+    idx = np.flatnonzero(flags)
+    return int(idx[0]) if len(idx) else None
+
+
+def predict_handoff(
+    dem: Dem,
+    sensors: Mapping[str, Sensor],
+    p_enu: np.ndarray,
+    v_enu: np.ndarray,
+    *,
+    current: str | None = None,
+    height_m: float = 1.5,
+    horizon_s: float = 20.0,
+    dt_s: float = 0.5,
+    min_fraction: float = 0.5,
+    max_range_m: float = 1000.0,
+    roads: RoadNetwork | None = None,
+) -> HandoffPrediction:
+    """Predict the hand-off of a target at ``p_enu`` moving at ``v_enu`` (m, m/s).
+
+    ``current`` defaults to the camera that sees most of the target now. A camera "sees"
+    the target when at least ``min_fraction`` of its height is visible. With ``roads``, a
+    target within 5 m of a road is extrapolated along it (a vehicle follows the road),
+    keeping its lateral offset; otherwise in a straight line.
+    """
+    times = np.arange(0.0, horizon_s + 1e-9, dt_s)
+    path = _path(dem, p_enu, v_enu, times, roads)
+    seen = {
+        sid: f >= min_fraction
+        for sid, f in visibility_timeline(
+            dem, sensors, path, height_m, max_range_m=max_range_m
+        ).items()
+    }
+    if current is None:
+        now = {sid: f[0] for sid, f in seen.items() if f[0]}
+        current = next(iter(now), None)
+    exit_idx = _first(~seen[current]) if current is not None else 0
+    exit_in = None if exit_idx is None else float(times[exit_idx])
+    start = exit_idx if exit_idx is not None else len(times)
+    # A camera already pointing there, soonest first.
+    best: tuple[int, str] | None = None
+    for sid, flags in seen.items():
+        if sid == current:
+            continue
+        k = _first(flags[start:]) if start < len(times) else None
+        if k is not None and (best is None or start + k < best[0]):
+            best = (start + k, sid)
+    if best is not None:
+        k, sid = best
+        return HandoffPrediction(current, exit_in, sid, float(times[k]), False, None, None, path[k])
+    if exit_idx is None:
+        return HandoffPrediction(current, None, None, None)
+    # Nobody points there: the pan-tilt head with a clear sight line soonest, slewed.
+    others = {sid: s for sid, s in sensors.items() if sid != current}
+    clear = visibility_timeline(
+        dem, others, path[start:], height_m, in_view=False, max_range_m=max_range_m
+    )
+    for k in range(len(times) - start):
+        for sid, frac in clear.items():
+            if frac[k] >= min_fraction:
+                s = sensors[sid]
+                target = path[start + k] + [0.0, 0.0, height_m / 2]
+                d = target - s.head.position_enu
+                az = float(np.degrees(np.arctan2(d[0], d[1])))
+                tilt = float(np.degrees(np.arctan2(d[2], np.hypot(d[0], d[1]))))
+                pan = float(wrap_deg(az - s.head.mount_yaw_deg))
+                return HandoffPrediction(
+                    current, exit_in, sid, float(times[start + k]), True, pan, tilt, path[start + k]
+                )
+    return HandoffPrediction(current, exit_in, None, None)
+
+
+@dataclass(frozen=True)
+class HandoffScore:
+    """Hand-off predictions against what really happened on ground-truth paths.
+
+    Attributes
+    ----------
+    handoffs : int
+        Times a target left a camera's view and another camera saw it later.
+    correct : int
+        Of those, how many the prediction made ``lead_s`` before the exit named right.
+    lead_s : float
+        How long before the real exit the predictions were made.
+    early_s : list of float
+        For each correct hand-off, how long before the exit the prediction first named the
+        right camera (within the horizon).
+    """
+
+    handoffs: int
+    correct: int
+    lead_s: float
+    early_s: tuple[float, ...]
+
+    @property
+    def accuracy(self) -> float:
+        """Share of hand-offs predicted right (NaN when there were none)."""
+        return self.correct / self.handoffs if self.handoffs else float("nan")
+
+
+def evaluate_handoffs(
+    dem: Dem,
+    sensors: Mapping[str, Sensor],
+    truths: Sequence,
+    *,
+    height_m: float = 1.5,
+    lead_s: float = 2.0,
+    dt_s: float = 0.5,
+    horizon_s: float = 20.0,
+    min_fraction: float = 0.5,
+    roads: RoadNetwork | None = None,
+) -> HandoffScore:
+    """Score :func:`predict_handoff` on truth paths (``t_s`` (n,), ``p_enu`` (n, 3)).
+
+    The truth is resampled every ``dt_s``. The camera holding the target keeps it while it
+    sees at least ``min_fraction`` of it; when it loses it, the camera that sees most of it
+    then (or first afterwards) takes over. At each such hand-off, predictions made ``lead_s``
+    before it (with the truth's velocity, and ``roads`` if given) are compared with the
+    camera that really took the target.
+    """
+    handoffs = correct = 0
+    early: list[float] = []
+    for truth in truths:
+        t = np.arange(truth.t_s[0], truth.t_s[-1], dt_s)
+        p = np.column_stack([np.interp(t, truth.t_s, truth.p_enu[:, k]) for k in range(3)])
+        v = np.gradient(p, dt_s, axis=0)
+        frac = visibility_timeline(dem, sensors, p, height_m)
+        ids = list(frac)
+        seen = np.column_stack([frac[s] >= min_fraction for s in ids])
+        share = np.column_stack([frac[s] for s in ids])
+        current = int(np.argmax(share[0])) if seen[0].any() else -1
+        for i in range(1, len(t)):
+            if current < 0:
+                current = int(np.argmax(share[i])) if seen[i].any() else -1
+                continue
+            if seen[i, current]:
+                continue
+            # The current camera lost the target at t[i]: who sees it next?
+            others = np.flatnonzero(seen[i])
+            later = np.flatnonzero(seen[i:].any(axis=1))
+            if len(others):
+                nxt = int(others[np.argmax(share[i, others])])
+            elif len(later):
+                j = i + int(later[0])
+                nxt = int(np.argmax(share[j]))
+            else:
+                break
+            if nxt == current:
+                continue  # lost and found again by the same camera: a gap, not a hand-off
+            handoffs += 1
+            first_right = None
+            for k in range(max(0, i - int(horizon_s / dt_s)), i):
+                if not seen[k, current]:
+                    continue
+                pred = predict_handoff(
+                    dem, sensors, p[k], v[k], current=ids[current], height_m=height_m,
+                    horizon_s=horizon_s, dt_s=dt_s, min_fraction=min_fraction, roads=roads,
+                )  # fmt: skip
+                right = pred.next_sensor == ids[nxt]
+                if right and first_right is None:
+                    first_right = t[i] - t[k]
+                if right and abs((t[i] - t[k]) - lead_s) < dt_s / 2:
+                    correct += 1
+            if first_right is not None:
+                early.append(float(first_right))
+            current = nxt if seen[i, nxt] else -1
+    return HandoffScore(handoffs, correct, lead_s, tuple(early))

@@ -1,0 +1,80 @@
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from demtrack.core.camera import Intrinsics
+from demtrack.core.dem import Dem
+from demtrack.core.grid import GridSpec
+from demtrack.core.handoff import evaluate_handoffs, predict_handoff
+from demtrack.core.pantilt import PanTiltHead
+from demtrack.core.site import Sensor
+
+INTR = Intrinsics(320.0, 320.0, 319.5, 239.5, 640, 480)  # 90 deg horizontal field of view
+
+
+def flat(size=200.0, cell=1.0):
+    n = int(2 * size / cell)
+    grid = GridSpec(-size, size, cell, n, n)
+    return Dem(grid, np.zeros(grid.shape, np.float32))
+
+
+def sensor(sid, x, y, yaw, pan=0.0, tilt=-20.0):
+    return Sensor(sid, sid, PanTiltHead([x, y, 15.0], yaw, INTR), pan, tilt)
+
+
+@dataclass
+class Truth:
+    t_s: np.ndarray
+    p_enu: np.ndarray
+
+
+def two_cameras():
+    # A looks north from (-40, -40), B looks north from (+40, -40): their ground footprints
+    # are side by side, with a strip near x = 0 seen by neither at y ~ 0.
+    return {"A": sensor("A", -40.0, -40.0, 0.0), "B": sensor("B", 40.0, -40.0, 0.0)}
+
+
+def test_walking_east_passes_from_a_to_b():
+    dem, cams = flat(), two_cameras()
+    pred = predict_handoff(
+        dem, cams, np.array([-40.0, 0.0, 0.0]), np.array([4.0, 0.0, 0.0]), height_m=1.7
+    )
+    assert pred.current == "A" and pred.next_sensor == "B" and not pred.slew
+    assert 0 < pred.exit_in_s <= pred.next_in_s < 20
+    # Where B picks it up the target is in B's image.
+    u, v, front = cams["B"].camera.project((pred.acquisition_enu + [0, 0, 0.85])[None, :])
+    assert front[0] and cams["B"].camera.in_image(u, v)[0]
+
+
+def test_slew_points_the_next_head_at_the_target():
+    dem = flat()
+    cams = {"A": sensor("A", -40.0, -40.0, 0.0), "B": sensor("B", 40.0, -40.0, 0.0, pan=180.0)}
+    pred = predict_handoff(
+        dem, cams, np.array([-40.0, 0.0, 0.0]), np.array([4.0, 0.0, 0.0]), height_m=1.7
+    )
+    assert pred.next_sensor == "B" and pred.slew
+    cam = cams["B"].head.camera_at(pred.pan_deg, pred.tilt_deg)
+    u, v, _ = cam.project((pred.acquisition_enu + [0, 0, 0.85])[None, :])
+    assert u[0] == pytest.approx(INTR.cx, abs=1e-6) and v[0] == pytest.approx(INTR.cy, abs=1e-6)
+
+
+def test_nobody_next_when_walking_out_of_every_cameras_range():
+    dem, cams = flat(), two_cameras()
+    pred = predict_handoff(
+        dem, cams, np.array([-40.0, 0.0, 0.0]), np.array([0.0, 5.0, 0.0]), max_range_m=60.0
+    )
+    assert pred.current == "A" and pred.next_sensor is None
+    # A loses it at about 60 m: sqrt(60^2 - 15^2) - 40 = 18.1 m north, 3.6 s.
+    assert pred.exit_in_s == pytest.approx(3.6, abs=0.5)
+
+
+def test_evaluation_counts_the_truth_handoff_and_scores_it():
+    dem, cams = flat(), two_cameras()
+    t = np.arange(0.0, 30.0, 0.1)
+    truth = Truth(t, np.column_stack([-60.0 + 4.0 * t, np.zeros_like(t), np.zeros_like(t)]))
+    score = evaluate_handoffs(dem, cams, [truth], height_m=1.7)
+    assert score.handoffs == 1 and score.correct == 1 and score.accuracy == 1.0
+    assert score.early_s[0] >= 2.0
