@@ -103,6 +103,14 @@ class TrackerConfig:
     road_motion : bool
         Multi-hypothesis method only: move vehicle particles along the road network when
         one is given.
+    reacquire_s : float
+        A track that ended (coasted past its class's ``max_coast_s``) stays this long a
+        candidate identity for a new track (s; 0 disables): a newly confirmed track whose
+        first fix comes after the old one's last takes the old id when the old track's
+        motion model, predicted over the absence, gives its position a density above
+        ``clutter_density_per_m2`` (the density of an unrelated object). On a road
+        network the prediction follows the roads, so identity survives a long occlusion
+        without a gate that grows over the fields.
     seed : int
         Seed of the particle filter's random generator.
     """
@@ -126,6 +134,7 @@ class TrackerConfig:
     smoothing_lag: int = 5
     mode_radius_m: float = 3.0
     road_motion: bool = False
+    reacquire_s: float = 30.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -157,6 +166,8 @@ class TrackerConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise TrackingError(f"{name} must be a positive number, got {value}")
+        if not (math.isfinite(self.reacquire_s) and self.reacquire_s >= 0):
+            raise TrackingError(f"reacquire_s must be >= 0, got {self.reacquire_s}")
         if not (math.isfinite(self.step_window_s) and self.step_window_s >= 0):
             raise TrackingError(f"step_window_s must be >= 0, got {self.step_window_s}")
         if self.road_sigma_m is not None and not self.road_sigma_m > 0:

@@ -95,9 +95,10 @@ def triangulate_fixes(fix_a: Fix, fix_b: Fix, config: TrackerConfig) -> Fix | No
     midpoint within ``config.fusion_hit_gate_sigma`` hit sigmas plus 1 m (horizontally)
     of a terrain hit of each ray.
 
-    The result has one hit (the midpoint) whose sigma combines the rays' angular error
-    (``config.ray_sigma_rad`` times range) over the sine of their angle, and no less than
-    half the miss distance. Its origin and direction are ``fix_a``'s, its sensor is
+    The result has one hit (the midpoint) whose covariance combines the rays' angular
+    errors (``config.ray_sigma_rad`` times range) across each ray's ground track, plus
+    half the miss distance; its sigma is that covariance's worst direction. Its origin
+    and direction are ``fix_a``'s, its sensor is
     ``"a+b"`` (sorted names), its time the mean, its detection index ``fix_a``'s. It has
     a road hit (the midpoint) when either input had one.
     """
@@ -124,7 +125,10 @@ def _triangulate(fix_a: Fix, fix_b: Fix, config: TrackerConfig) -> tuple[Fix, fl
         return None
     sa = config.ray_sigma_rad * ra.range_a_m
     sb = config.ray_sigma_rad * ra.range_b_m
-    sigma = max(math.sqrt(0.5 * (sa * sa + sb * sb)) / sin_angle, 0.5 * ra.miss_m, 0.05)
+    worst = math.sqrt(0.5 * (sa * sa + sb * sb)) / sin_angle
+    cov = _triangulation_cov(fix_a, fix_b, sa, sb, worst)
+    cov += (max(0.5 * ra.miss_m, 0.05) ** 2) * np.eye(2)
+    sigma = math.sqrt(float(np.linalg.eigvalsh(cov)[-1]))
     road = ra.p_enu if (fix_a.road_hit_enu is not None or fix_b.road_hit_enu is not None) else None
     scores = [s for s in (fix_a.score, fix_b.score) if s is not None]
     fused = Fix(
@@ -138,8 +142,30 @@ def _triangulate(fix_a: Fix, fix_b: Fix, config: TrackerConfig) -> tuple[Fix, fl
         hit_sigma_m=np.array([sigma]),
         road_hit_enu=road,
         score=max(scores) if scores else None,
+        hit_cov_en_m2=cov[None],
     )
     return fused, ra.miss_m
+
+
+def _triangulation_cov(fix_a: Fix, fix_b: Fix, sa: float, sb: float, worst: float) -> np.ndarray:
+    """Horizontal covariance (2, 2) of a two-ray triangulation (m^2).
+
+    Each ray pins the point across its own ground track to ``sigma_ray * range`` and says
+    nothing along it; the information of the two adds. Rays whose ground tracks are
+    (nearly) parallel leave a direction unpinned, so a weak isotropic prior of the
+    worst-direction sigma ``worst`` (m) bounds it.
+    """
+    info = np.eye(2) / (worst * worst)
+    for fix, s in ((fix_a, sa), (fix_b, sb)):
+        g = fix.direction_enu[:2]
+        norm = float(np.hypot(g[0], g[1]))
+        if norm < 1e-9:  # a vertical ray pins both directions
+            info += np.eye(2) / (s * s)
+            continue
+        n = np.array([-g[1], g[0]]) / norm
+        info += np.outer(n, n) / (s * s)
+    cov = np.linalg.inv(info)
+    return 0.5 * (cov + cov.T)
 
 
 def fuse_measurements(

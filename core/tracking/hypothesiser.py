@@ -1,9 +1,9 @@
 """Hypothesiser: chi-square gate on the hit nearest a track's predicted position.
 
 For a fix with several hits, the cost of the fix to a track is the best hit's squared
-Mahalanobis distance ``d2 = nu^T (P + sigma^2 I)^-1 nu`` (``P`` the predicted horizontal
-covariance, ``sigma`` the hit's). A fix none of whose hits is inside the gate yields no
-hypothesis, so the track's only option for it is the missed detection.
+Mahalanobis distance ``d2 = nu^T (P + R)^-1 nu`` (``P`` the predicted horizontal
+covariance, ``R`` the hit's, elongated along its ray). A fix none of whose hits is
+inside the gate yields no hypothesis, so the track's only option for it is the missed detection.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ class GatedNearestHit:
         """Squared Mahalanobis distance of every candidate, shape (m,)."""
         out = np.empty(cands.size)
         for j in range(cands.size):
-            s = cov_xy + float(cands.sigma_m[j]) ** 2 * np.eye(2)
+            s = cov_xy + cands.cov(j)
             nu = cands.z_enu[j, :2] - mean_xy
             out[j] = float(nu @ np.linalg.solve(s, nu))
         return out

@@ -1,8 +1,8 @@
 """Kalman filter on the constant-velocity state, with a hit-mixture (PDA) update.
 
 The state is Gaussian over ``[x, y, vx, vy]`` (local frame, m and m/s); the measurement
-is a hit's horizontal position with covariance ``sigma^2 I``. When the measurement model
-hands over several candidates as a mixture (no road hit, say), the update is the
+is a hit's horizontal position with its covariance (elongated along the ray). When the
+measurement model hands over several candidates as a mixture (no road hit, say), the update is the
 probabilistic data association one: each hit is weighed by its likelihood under the
 prediction against a clutter floor, and the weighted posteriors are merged by moment
 matching, so a tree-crown hit far from the prediction barely moves the track.
@@ -47,9 +47,11 @@ class GaussianState:
     history: tuple[tuple[float, np.ndarray, np.ndarray], ...] = ()
 
 
-def _kalman(x: np.ndarray, p: np.ndarray, z_xy: np.ndarray, sigma: float) -> tuple:
-    """One linear update; returns (x, P). Joseph form keeps P symmetric positive."""
-    r = sigma**2 * np.eye(2)
+def _kalman(x: np.ndarray, p: np.ndarray, z_xy: np.ndarray, r: np.ndarray) -> tuple:
+    """One linear update with measurement covariance ``r`` (2, 2); returns (x, P).
+
+    Joseph form keeps P symmetric positive.
+    """
     s = _H @ p @ _H.T + r
     k = np.linalg.solve(s, _H @ p).T  # P H^T S^-1, S symmetric
     x_new = x + k @ (z_xy - _H @ x)
@@ -93,13 +95,14 @@ class KalmanFilter:
             w = cands.weight
             mean = w @ cands.z_enu
             d = cands.z_enu[:, :2] - mean[:2]
-            var = float(w @ (cands.sigma_m**2 + 0.5 * np.sum(d * d, axis=1)))
+            pos = np.einsum("j,jab->ab", w, cands.covariances() + d[:, :, None] * d[:, None, :])
         else:
             mean = cands.z_enu[which]
-            var = float(cands.sigma_m[which] ** 2)
+            pos = cands.cov(which)
         x = np.array([mean[0], mean[1], 0.0, 0.0])
-        sv2 = self.init_speed_sigma_m_s**2
-        return self._remember(GaussianState(t_s, x, np.diag([var, var, sv2, sv2]), float(mean[2])))
+        p = np.diag([0.0, 0.0, self.init_speed_sigma_m_s**2, self.init_speed_sigma_m_s**2])
+        p[:2, :2] = pos
+        return self._remember(GaussianState(t_s, x, p, float(mean[2])))
 
     def predict(self, state: GaussianState, t_s: float, rng: np.random.Generator) -> GaussianState:
         """Predict to ``t_s`` (never backwards)."""
@@ -119,7 +122,7 @@ class KalmanFilter:
     ) -> GaussianState:
         """Update with candidate ``chosen``, or with all of them (PDA) for a mixture."""
         if not cands.mixture:
-            x, p = _kalman(state.x, state.P, cands.z_enu[chosen, :2], float(cands.sigma_m[chosen]))
+            x, p = _kalman(state.x, state.P, cands.z_enu[chosen, :2], cands.cov(chosen))
             out = GaussianState(state.t_s, x, p, float(cands.z_enu[chosen, 2]), state.history)
         else:
             out = self._pda(state, cands)
@@ -131,12 +134,12 @@ class KalmanFilter:
         xs = np.empty((m, 4))
         ps = np.empty((m, 4, 4))
         for j in range(m):
-            sigma = float(cands.sigma_m[j])
-            s = state.P[:2, :2] + sigma**2 * np.eye(2)
+            r = cands.cov(j)
+            s = state.P[:2, :2] + r
             nu = cands.z_enu[j, :2] - state.x[:2]
             d2 = float(nu @ np.linalg.solve(s, nu))
             lik[j] = cands.weight[j] * np.exp(-0.5 * d2) / (2 * np.pi * np.sqrt(np.linalg.det(s)))
-            xs[j], ps[j] = _kalman(state.x, state.P, cands.z_enu[j, :2], sigma)
+            xs[j], ps[j] = _kalman(state.x, state.P, cands.z_enu[j, :2], r)
         total = self.clutter_density_per_m2 + lik.sum()
         beta = lik / total
         beta0 = self.clutter_density_per_m2 / total
@@ -170,6 +173,13 @@ class KalmanFilter:
             out.append(xs[:2].copy())
             t_next = t_k
         return out[::-1]
+
+    def density(self, state: GaussianState, xy: np.ndarray, cov_xy: np.ndarray) -> float:
+        """Predictive density (1/m^2) of a position ``xy`` (2,) known to ``cov_xy`` (2, 2)."""
+        s = state.P[:2, :2] + cov_xy
+        nu = np.asarray(xy, dtype=np.float64) - state.x[:2]
+        d2 = float(nu @ np.linalg.solve(s, nu))
+        return float(np.exp(-0.5 * d2) / (2.0 * np.pi * np.sqrt(np.linalg.det(s))))
 
     def estimate(self, state: GaussianState) -> tuple[np.ndarray, np.ndarray | None]:
         """Position (3,) and horizontal covariance (2, 2)."""

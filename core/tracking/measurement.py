@@ -22,14 +22,22 @@ from .types import Fix
 __all__ = ["AllHits", "FirstHit", "HitMixture", "LastHit", "RoadHit"]
 
 
-def _cands(z: np.ndarray, sigma: np.ndarray, mixture: bool) -> Candidates:
+def _cands(
+    z: np.ndarray, sigma: np.ndarray, mixture: bool, cov: np.ndarray | None = None
+) -> Candidates:
     m = z.shape[0]
     return Candidates(
         z_enu=np.asarray(z, dtype=np.float64).reshape(m, 3),
         sigma_m=np.asarray(sigma, dtype=np.float64).reshape(m),
         weight=np.full(m, 1.0 / m),
         mixture=mixture,
+        cov_m2=None if cov is None else np.asarray(cov, dtype=np.float64).reshape(m, 2, 2),
     )
+
+
+def _covs(fix: Fix, index: slice) -> np.ndarray | None:
+    """The fix's full hit covariances at ``index`` (None when it has only sigmas)."""
+    return None if fix.hit_cov_en_m2 is None else fix.hit_cov_en_m2[index]
 
 
 @dataclass(frozen=True)
@@ -40,7 +48,7 @@ class FirstHit:
         """Return the first hit of ``fix``; None without hits."""
         if fix.n_hits == 0:
             return None
-        return _cands(fix.hits_enu[:1], fix.hit_sigma_m[:1], mixture=False)
+        return _cands(fix.hits_enu[:1], fix.hit_sigma_m[:1], False, _covs(fix, slice(0, 1)))
 
 
 @dataclass(frozen=True)
@@ -51,7 +59,7 @@ class LastHit:
         """Return the last hit of ``fix``; None without hits."""
         if fix.n_hits == 0:
             return None
-        return _cands(fix.hits_enu[-1:], fix.hit_sigma_m[-1:], mixture=False)
+        return _cands(fix.hits_enu[-1:], fix.hit_sigma_m[-1:], False, _covs(fix, slice(-1, None)))
 
 
 @dataclass(frozen=True)
@@ -62,7 +70,7 @@ class AllHits:
         """All hits of ``fix``; None without hits."""
         if fix.n_hits == 0:
             return None
-        return _cands(fix.hits_enu, fix.hit_sigma_m, mixture=False)
+        return _cands(fix.hits_enu, fix.hit_sigma_m, False, _covs(fix, slice(None)))
 
 
 @dataclass(frozen=True)
@@ -73,7 +81,7 @@ class HitMixture:
         """All hits of ``fix`` as a mixture; None without hits."""
         if fix.n_hits == 0:
             return None
-        return _cands(fix.hits_enu, fix.hit_sigma_m, mixture=True)
+        return _cands(fix.hits_enu, fix.hit_sigma_m, True, _covs(fix, slice(None)))
 
 
 @dataclass(frozen=True)

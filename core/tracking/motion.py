@@ -19,7 +19,12 @@ import numpy as np
 from ..errors import TrackingError
 from .protocols import Candidates
 
-__all__ = ["ConstantVelocity", "ConstantVelocityParticles", "allocate_counts"]
+__all__ = [
+    "ConstantVelocity",
+    "ConstantVelocityParticles",
+    "allocate_counts",
+    "sample_candidates",
+]
 
 
 @dataclass(frozen=True)
@@ -55,6 +60,19 @@ class ConstantVelocity:
         return out
 
 
+def sample_candidates(cands: Candidates, n: int, rng: np.random.Generator) -> np.ndarray:
+    """``n`` horizontal positions (n, 2) drawn around the candidates by their weights.
+
+    Each candidate gets its share of the samples (:func:`allocate_counts`), drawn from
+    its Gaussian (its full covariance, elongated along the ray).
+    """
+    counts = allocate_counts(cands.weight, n)
+    chol = np.linalg.cholesky(cands.covariances())
+    which = np.repeat(np.arange(cands.size), counts)
+    e = rng.standard_normal((n, 2))
+    return cands.z_enu[which, :2] + np.einsum("nij,nj->ni", chol[which], e)
+
+
 def allocate_counts(weight: np.ndarray, n: int) -> np.ndarray:
     """Split ``n`` items over ``weight`` (sums to 1) by largest remainders; shape (m,)."""
     raw = np.asarray(weight, dtype=np.float64) * n
@@ -83,11 +101,8 @@ class ConstantVelocityParticles:
 
     def initial(self, cands: Candidates, n: int, rng: np.random.Generator) -> np.ndarray:
         """``n`` particles around the candidates in proportion to their weights."""
-        counts = allocate_counts(cands.weight, n)
-        centre = np.repeat(cands.z_enu[:, :2], counts, axis=0)
-        sigma = np.repeat(cands.sigma_m, counts)[:, None]
         out = np.empty((n, 4))
-        out[:, :2] = centre + sigma * rng.standard_normal((n, 2))
+        out[:, :2] = sample_candidates(cands, n, rng)
         out[:, 2:] = self.init_speed_sigma_m_s * rng.standard_normal((n, 2))
         return out
 

@@ -3,9 +3,10 @@
 A fix that met the terrain several times does not say which hit is the object. The
 likelihood of a particle at horizontal position ``x`` is therefore::
 
-    L(x) = sum_j w_j N(x; h_j, sigma_j^2 I) + rho
+    L(x) = sum_j w_j N(x; h_j, R_j) + rho
 
-over every hit ``h_j`` (prior weights ``w_j``), plus a clutter floor ``rho`` (1/m^2) so a
+over every hit ``h_j`` (prior weights ``w_j``, covariance ``R_j`` elongated along the
+ray), plus a clutter floor ``rho`` (1/m^2) so a
 fix that is none of the object's cannot wipe the particle set out. Particles near any hit
 survive; several hypotheses ride along until motion disambiguates them (a tree crown
 does not move like a car), so a wrong first choice never dooms a track. Resampling is
@@ -58,9 +59,12 @@ def mixture_likelihood(
     out = np.full(xy.shape[0], rho_per_m2)
     for j in idx:
         w = 1.0 if only is not None else float(cands.weight[j])
-        s2 = float(cands.sigma_m[j]) ** 2
-        d2 = np.sum((xy - cands.z_enu[j, :2]) ** 2, axis=1)
-        out += w * np.exp(-0.5 * d2 / s2) / (2.0 * np.pi * s2)
+        r = cands.cov(j)
+        det = float(r[0, 0] * r[1, 1] - r[0, 1] * r[1, 0])
+        inv = np.array([[r[1, 1], -r[0, 1]], [-r[1, 0], r[0, 0]]]) / det
+        d = xy - cands.z_enu[j, :2]
+        d2 = np.einsum("ni,ij,nj->n", d, inv, d)
+        out += w * np.exp(-0.5 * d2) / (2.0 * np.pi * np.sqrt(det))
     return out
 
 
@@ -123,12 +127,7 @@ class ParticleFilter:
     ) -> ParticleState:
         """Particles over all candidates (``which`` None) or around one."""
         if which is not None:
-            cands = Candidates(
-                cands.z_enu[which : which + 1],
-                cands.sigma_m[which : which + 1],
-                np.ones(1),
-                cands.mixture,
-            )
+            cands = cands.take(slice(which, which + 1))
         particles = self.motion.initial(cands, self.n_particles, rng)
         weights = np.full(self.n_particles, 1.0 / self.n_particles)
         xy = self.motion.positions(particles).copy()
@@ -178,6 +177,18 @@ class ParticleFilter:
             history = tuple(h[index] for h in history)
             w = np.full(w.shape[0], 1.0 / w.shape[0])
         return ParticleState(state.t_s, particles, w, z, history)
+
+    def density(self, state: ParticleState, xy: np.ndarray, cov_xy: np.ndarray) -> float:
+        """Predictive density (1/m^2) of a position ``xy`` (2,) known to ``cov_xy`` (2, 2).
+
+        The particles' weighted kernel sum: on a road network it stays concentrated on
+        the roads the object could have driven, however long it was unseen.
+        """
+        cands = Candidates(
+            np.array([[xy[0], xy[1], 0.0]]), np.ones(1), np.ones(1), False, cov_xy[None]
+        )
+        lik = mixture_likelihood(self.motion.positions(state.particles), cands, 0.0, only=0)
+        return float(state.weights @ lik)
 
     def revise(self, state: ParticleState, n: int) -> list[np.ndarray]:
         """Re-estimate the last ``n`` measurement times from today's weights.

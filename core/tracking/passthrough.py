@@ -84,6 +84,10 @@ class PassThroughFilter:
         kf = self.predictor.update(state.predictor, single, chosen, rng)
         return RawState(state.t_s, kf, cands.z_enu[chosen].copy(), float(cands.sigma_m[chosen]))
 
+    def density(self, state: RawState, xy: np.ndarray, cov_xy: np.ndarray) -> float:
+        """Zero: the raw methods never carry an identity across a lost spell."""
+        return 0.0
+
     def revise(self, state: RawState, n: int) -> list[np.ndarray]:
         """No retrospective estimates (an empty list): past points stand as measured."""
         return []

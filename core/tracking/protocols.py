@@ -61,12 +61,38 @@ class Candidates:
     mixture : bool
         True: the update uses every candidate as a mixture (hypotheses carried or
         weighed); False: it uses only the one the hypothesiser chose.
+    cov_m2 : ndarray, shape (m, 2, 2), or None
+        Full horizontal covariance of each (m^2); None: isotropic ``sigma_m**2 I``.
     """
 
     z_enu: np.ndarray
     sigma_m: np.ndarray
     weight: np.ndarray
     mixture: bool
+    cov_m2: np.ndarray | None = None
+
+    def cov(self, j: int) -> np.ndarray:
+        """Horizontal covariance (2, 2) of candidate ``j`` (m^2)."""
+        if self.cov_m2 is not None:
+            return self.cov_m2[j]
+        return float(self.sigma_m[j]) ** 2 * np.eye(2)
+
+    def covariances(self) -> np.ndarray:
+        """Horizontal covariances of all candidates, shape (m, 2, 2) (m^2)."""
+        if self.cov_m2 is not None:
+            return self.cov_m2
+        return self.sigma_m[:, None, None] ** 2 * np.eye(2)[None]
+
+    def take(self, index: np.ndarray | slice) -> Candidates:
+        """The candidates at ``index``, weights renormalised."""
+        w = self.weight[index]
+        return Candidates(
+            self.z_enu[index],
+            self.sigma_m[index],
+            w / w.sum(),
+            self.mixture,
+            None if self.cov_m2 is None else self.cov_m2[index],
+        )
 
     @property
     def size(self) -> int:
@@ -193,6 +219,10 @@ class Filter(Protocol):
 
     def estimate(self, state: Any) -> tuple[np.ndarray, np.ndarray | None]:
         """Position estimate (3,) and its horizontal covariance (2, 2) or None."""
+        ...
+
+    def density(self, state: Any, xy: np.ndarray, cov_xy: np.ndarray) -> float:
+        """Predictive density (1/m^2) of a position ``xy`` (2,) with covariance ``cov_xy``."""
         ...
 
     def revise(self, state: Any, n: int) -> list[np.ndarray]:

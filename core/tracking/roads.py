@@ -19,7 +19,7 @@ import shapely
 from shapely import LineString, MultiLineString, STRtree
 
 from ..errors import TrackingError
-from .motion import allocate_counts
+from .motion import sample_candidates
 from .protocols import Candidates
 
 __all__ = ["RoadGraph", "RoadParticles", "RoadParticleMotion"]
@@ -196,10 +196,7 @@ class RoadParticleMotion:
 
     def initial(self, cands: Candidates, n: int, rng: np.random.Generator) -> RoadParticles:
         """Draw samples around the candidates, snapped onto the nearest roads."""
-        counts = allocate_counts(cands.weight, n)
-        centre = np.repeat(cands.z_enu[:, :2], counts, axis=0)
-        sigma = np.repeat(cands.sigma_m, counts)[:, None]
-        xy = centre + sigma * rng.standard_normal((n, 2))
+        xy = sample_candidates(cands, n, rng)
         edge, s, lateral = self.network.snap(xy)
         lateral = np.clip(lateral, -self.max_lateral_m, self.max_lateral_m)
         v = self.init_speed_sigma_m_s * rng.standard_normal(n)

@@ -375,12 +375,57 @@ class Tracker:
             p = np.array([xy[0], xy[1], cands.z_enu[near, 2]])
             rec.points[k] = TrackPoint(old.t_s, p, old.sensors, old.fix_indices, old.cov_xy)
 
-    def _confirm(self, rec: _Record) -> None:
-        """Give ``rec`` an id and let its filter revise the points made while tentative."""
-        rec.track_id = self._next_id
-        self._next_id += 1
+    def _confirm(self, rec: _Record, t: float) -> None:
+        """Give ``rec`` an id and let its filter revise the points made while tentative.
+
+        The id is that of an earlier track when :meth:`_predecessor` finds one (the same
+        object, back after an absence); otherwise a new one.
+        """
         self._revise(rec, len(rec.points))
         del rec.cands[: -(self.config.smoothing_lag + 1)]
+        old = self._predecessor(rec, t)
+        if old is None:
+            rec.track_id = self._next_id
+            self._next_id += 1
+            return
+        rec.track_id = old.track_id
+        rec.points = old.points + rec.points
+        rec.t_created = old.t_created
+        if old in self._live:
+            self._live.remove(old)
+        else:
+            self._ended.remove(old)
+
+    def _predecessor(self, rec: _Record, t: float) -> _Record | None:
+        """The lost track of ``rec``'s class that best explains ``rec`` (or None).
+
+        Candidates: confirmed tracks, live (coasting) or ended less than
+        ``config.reacquire_s`` ago, whose last fix precedes ``rec``'s first (so the two
+        were never seen at once: they cannot be two objects side by side). Each one's
+        state is predicted to ``t`` by its own motion model, and the density it gives
+        ``rec``'s position (with ``rec``'s covariance) must beat the clutter density.
+        """
+        window = self.config.reacquire_s
+        if window <= 0:
+            return None
+        flt = self.components.per_class[rec.cls].filter
+        density = getattr(flt, "density", None)
+        if density is None:
+            return None
+        xy, cov = flt.gaussian(rec.state)
+        pool = [r for r in self._live if r.track_id is not None] + [
+            r for r in self._ended if t - r.t_update <= window
+        ]
+        best, best_density = None, self.config.clutter_density_per_m2
+        for old in pool:
+            if old.cls != rec.cls or old.t_update >= rec.t_created:
+                continue
+            # a private generator: looking must not change the tracker's random stream
+            pred = flt.predict(old.state, t, np.random.default_rng(old.uid))
+            d = float(density(pred, xy, cov))
+            if d > best_density:
+                best, best_density = old, d
+        return best
 
     def _confirm_and_delete(self, t: float) -> None:
         per_class = self.components.per_class
@@ -398,7 +443,7 @@ class Tracker:
                 ):
                     winners[rec.group] = rec
         for group in sorted(winners, key=lambda g: winners[g].uid):
-            self._confirm(winners[group])
+            self._confirm(winners[group], t)
         keep: list[_Record] = []
         for rec in self._live:
             if rec.track_id is None:

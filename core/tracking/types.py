@@ -135,6 +135,10 @@ class Fix:
         The road rule's answer (the point of the ray on the road network), if any.
     score : float or None
         Detector confidence, copied from the detection.
+    hit_cov_en_m2 : array_like, shape (k, 2, 2), or None
+        Full horizontal covariance (east, north) of each hit (m^2). A hit is elongated
+        along its ray's ground track (a pixel error moves it far along a grazing ray and
+        little across it); None means isotropic, ``hit_sigma_m**2 * I``.
     """
 
     t_s: float
@@ -147,6 +151,7 @@ class Fix:
     hit_sigma_m: np.ndarray
     road_hit_enu: np.ndarray | None = None
     score: float | None = None
+    hit_cov_en_m2: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if not math.isfinite(float(self.t_s)):
@@ -178,11 +183,28 @@ class Fix:
         object.__setattr__(self, "hits_enu", hits)
         object.__setattr__(self, "hit_sigma_m", sigma)
         object.__setattr__(self, "road_hit_enu", road)
+        if self.hit_cov_en_m2 is not None:
+            cov = np.asarray(self.hit_cov_en_m2, dtype=np.float64)
+            if cov.size == 0 and hits.shape[0] == 0:
+                cov = np.zeros((0, 2, 2))
+            cov = _frozen_array(cov, (hits.shape[0], 2, 2), "hit_cov_en_m2", err)
+            sym = 0.5 * (cov + np.swapaxes(cov, 1, 2))
+            det = sym[:, 0, 0] * sym[:, 1, 1] - sym[:, 0, 1] ** 2
+            if np.any(sym[:, 0, 0] <= 0) or np.any(det <= 0):
+                raise TrackingError("hit_cov_en_m2 must be symmetric positive definite")
+            sym.setflags(write=False)
+            object.__setattr__(self, "hit_cov_en_m2", sym)
 
     @property
     def n_hits(self) -> int:
         """Number of terrain hits ``k``."""
         return int(self.hits_enu.shape[0])
+
+    def hit_covariances(self) -> np.ndarray:
+        """Horizontal covariance of every hit, shape (k, 2, 2) (m^2)."""
+        if self.hit_cov_en_m2 is not None:
+            return self.hit_cov_en_m2
+        return self.hit_sigma_m[:, None, None] ** 2 * np.eye(2)[None]
 
 
 @dataclass(frozen=True, eq=False)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from demtrack.core.fix_builder import build_fixes, default_foot_offsets
+from demtrack.core.fix_builder import build_fixes, default_foot_offsets, footprint_variances
 from demtrack.core.site import load_site
 from demtrack.core.tracking import Detection
 from demtrack.samplesite.scenarios import (
@@ -29,7 +29,16 @@ def test_a_box_gives_the_geolocation_of_its_bottom_centre(site):
     (g,) = site.geolocator().geolocate(cam, [630.0], [540.5], rule="all")
     assert report.n_fixes == 1 and fix.n_hits == len(g.hits) >= 1
     np.testing.assert_allclose(fix.hits_enu, [h.p_enu for h in g.hits], atol=1e-9)
-    np.testing.assert_allclose(fix.hit_sigma_m, [h.sigma_m for h in g.hits])
+    # covariance: the geolocator's plus the footprint's extent (isotropic across the ray,
+    # the heading spread of the foot-to-centre distance along it)
+    along, across = footprint_variances()["vehicle"]
+    assert across == pytest.approx((4.5**2 + 1.8**2) / 24)
+    d2 = g.direction_enu[:2] / np.linalg.norm(g.direction_enu[:2])
+    extent = across * np.eye(2) + (along - across) * np.outer(d2, d2)
+    want = np.array([h.cov_en_m2 for h in g.hits]) + extent
+    np.testing.assert_allclose(fix.hit_cov_en_m2, want, atol=1e-12)
+    np.testing.assert_allclose(fix.hit_sigma_m, np.sqrt(np.linalg.eigvalsh(want)[:, -1]))
+    assert np.all(fix.hit_sigma_m >= [h.sigma_m for h in g.hits])
     np.testing.assert_allclose(fix.origin_enu, g.origin_enu)
     # With the default foot offset every hit moves (L + W) / pi along the ray's ground track.
     (moved,), _ = build_fixes(site, [det])
