@@ -12,6 +12,7 @@ from . import (
     handoff,
     sample_site,
     scenario,
+    serve,
     track,
     viewshed,
 )
@@ -30,5 +31,6 @@ COMMANDS = (
     viewshed,
     activity,
     handoff,
+    serve,
     bench,
 )

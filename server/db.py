@@ -1,0 +1,381 @@
+"""SQLite persistence: detections, fixes, tracks and the event log.
+
+One file (WAL journal, ``synchronous=FULL``), a versioned schema with ordered migrations,
+one write connection and one read connection, each behind its own lock (the server calls
+in from worker threads). A detection batch is durable when :meth:`Store.insert_batch`
+returns: its transaction has committed and, with ``synchronous=FULL``, the WAL is synced.
+
+Tables
+------
+``schema_version``  the applied version (one row)
+``batches``         one row per ingest request: optional client key, counts, report
+``detections``      accepted detection records, id = arrival order
+``fixes``           one per processed detection (derived: ray, every hit, status)
+``tracks``          the tracker's tracks (derived; rewritten on start-up replay)
+``events``          the WebSocket stream, ``seq`` = its sequence number
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import threading
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from demtrack.core.tracking.types import Detection
+
+__all__ = ["MIGRATIONS", "SCHEMA_VERSION", "Store", "StoredBatch", "connect", "migrate"]
+
+
+def _run_script(conn: sqlite3.Connection, script: str) -> None:
+    # Statement by statement: ``executescript`` would commit the migration's transaction.
+    for stmt in script.split(";"):
+        if stmt.strip():
+            conn.execute(stmt)
+
+
+def _m1_initial(conn: sqlite3.Connection) -> None:
+    _run_script(
+        conn,
+        """
+        CREATE TABLE batches (
+            id INTEGER PRIMARY KEY,
+            batch_key TEXT UNIQUE,
+            n_records INTEGER NOT NULL,
+            n_accepted INTEGER NOT NULL,
+            report TEXT NOT NULL
+        );
+        CREATE TABLE detections (
+            id INTEGER PRIMARY KEY,
+            batch_id INTEGER NOT NULL REFERENCES batches(id),
+            t_s REAL NOT NULL,
+            sensor TEXT NOT NULL,
+            u_min REAL NOT NULL, v_min REAL NOT NULL, u_max REAL NOT NULL, v_max REAL NOT NULL,
+            cls TEXT NOT NULL,
+            score REAL,
+            local_id TEXT
+        );
+        CREATE INDEX detections_sensor_t ON detections(sensor, t_s);
+        CREATE TABLE fixes (
+            detection_id INTEGER PRIMARY KEY REFERENCES detections(id),
+            t_s REAL NOT NULL,
+            sensor TEXT NOT NULL,
+            cls TEXT NOT NULL,
+            status TEXT NOT NULL,
+            body TEXT NOT NULL
+        );
+        CREATE TABLE tracks (
+            id INTEGER PRIMARY KEY,
+            cls TEXT NOT NULL,
+            t_start REAL NOT NULL,
+            t_end REAL NOT NULL,
+            e_min REAL NOT NULL, n_min REAL NOT NULL, e_max REAL NOT NULL, n_max REAL NOT NULL,
+            sensors TEXT NOT NULL,
+            live INTEGER NOT NULL,
+            body TEXT NOT NULL
+        );
+        CREATE TABLE events (
+            seq INTEGER PRIMARY KEY AUTOINCREMENT,
+            type TEXT NOT NULL,
+            payload TEXT NOT NULL
+        );
+        """,
+    )
+
+
+#: Ordered migrations; applying ``MIGRATIONS[k]`` takes the schema from version k to k + 1.
+MIGRATIONS: tuple[Callable[[sqlite3.Connection], None], ...] = (_m1_initial,)
+SCHEMA_VERSION = len(MIGRATIONS)
+
+
+def connect(path: Path) -> sqlite3.Connection:
+    """Open ``path`` in WAL mode with ``synchronous=FULL`` (autocommit; explicit BEGINs)."""
+    conn = sqlite3.connect(path, isolation_level=None, check_same_thread=False, timeout=30.0)
+    conn.execute("PRAGMA journal_mode=WAL")
+    conn.execute("PRAGMA synchronous=FULL")
+    conn.execute("PRAGMA foreign_keys=ON")
+    return conn
+
+
+def migrate(conn: sqlite3.Connection) -> int:
+    """Apply the pending migrations, each in its own transaction; return the new version.
+
+    Raises
+    ------
+    RuntimeError
+        If the file's schema is newer than this demtrack knows.
+    """
+    conn.execute("CREATE TABLE IF NOT EXISTS schema_version (version INTEGER NOT NULL)")
+    row = conn.execute("SELECT version FROM schema_version").fetchone()
+    version = 0 if row is None else int(row[0])
+    if version > SCHEMA_VERSION:
+        raise RuntimeError(
+            f"database schema version {version} is newer than this demtrack ({SCHEMA_VERSION})"
+        )
+    for k in range(version, SCHEMA_VERSION):
+        conn.execute("BEGIN IMMEDIATE")
+        try:
+            MIGRATIONS[k](conn)
+            conn.execute("DELETE FROM schema_version")
+            conn.execute("INSERT INTO schema_version (version) VALUES (?)", (k + 1,))
+            conn.execute("COMMIT")
+        except BaseException:
+            conn.execute("ROLLBACK")
+            raise
+    return SCHEMA_VERSION
+
+
+@dataclass(frozen=True)
+class StoredBatch:
+    """A committed ingest batch.
+
+    Attributes
+    ----------
+    batch_id : int
+    detection_ids : tuple of int
+        Ids of its accepted detections, in record order.
+    report : dict
+        The acknowledgement sent for it (returned again for a repeated ``batch_key``).
+    duplicate : bool
+        The key had been seen: nothing was inserted this time.
+    """
+
+    batch_id: int
+    detection_ids: tuple[int, ...]
+    report: dict[str, Any]
+    duplicate: bool = False
+
+
+def _dumps(obj: Any) -> str:
+    return json.dumps(obj, separators=(",", ":"), allow_nan=False)
+
+
+class Store:
+    """The console's SQLite file (see the module docstring)."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self._w = connect(self.path)
+        migrate(self._w)
+        self._r = connect(self.path)
+        self._wlock = threading.Lock()
+        self._rlock = threading.Lock()
+
+    def close(self) -> None:
+        """Close both connections."""
+        with self._wlock, self._rlock:
+            self._w.close()
+            self._r.close()
+
+    # ------------------------------------------------------------------ writing
+    def _tx(self, fn: Callable[[sqlite3.Connection], Any]) -> Any:
+        with self._wlock:
+            self._w.execute("BEGIN IMMEDIATE")
+            try:
+                out = fn(self._w)
+                self._w.execute("COMMIT")
+            except BaseException:
+                self._w.execute("ROLLBACK")
+                raise
+            return out
+
+    def insert_batch(
+        self, detections: Sequence[Detection], report: dict[str, Any], batch_key: str | None
+    ) -> StoredBatch:
+        """Insert one batch and its accepted detections in one committed transaction.
+
+        A ``batch_key`` seen before inserts nothing and returns the first report (so a
+        client may safely resend a batch whose acknowledgement it lost).
+        """
+
+        def run(c: sqlite3.Connection) -> StoredBatch:
+            if batch_key is not None:
+                row = c.execute(
+                    "SELECT id, report FROM batches WHERE batch_key = ?", (batch_key,)
+                ).fetchone()
+                if row is not None:
+                    ids = [
+                        r[0]
+                        for r in c.execute(
+                            "SELECT id FROM detections WHERE batch_id = ? ORDER BY id", (row[0],)
+                        )
+                    ]
+                    return StoredBatch(row[0], tuple(ids), json.loads(row[1]), duplicate=True)
+            cur = c.execute(
+                "INSERT INTO batches (batch_key, n_records, n_accepted, report) VALUES (?,?,?,?)",
+                (batch_key, report["n_records"], report["accepted"], _dumps(report)),
+            )
+            batch_id = int(cur.lastrowid or 0)
+            ids = []
+            for d in detections:
+                cur = c.execute(
+                    "INSERT INTO detections (batch_id, t_s, sensor, u_min, v_min, u_max, v_max,"
+                    " cls, score, local_id) VALUES (?,?,?,?,?,?,?,?,?,?)",
+                    (batch_id, d.t_s, d.sensor, *d.bbox, d.cls, d.score, d.local_id),
+                )
+                ids.append(int(cur.lastrowid or 0))
+            return StoredBatch(batch_id, tuple(ids), report)
+
+        return self._tx(run)
+
+    def write_derived(
+        self,
+        fixes: Iterable[tuple[int, float, str, str, str, dict[str, Any]]],
+        tracks: Iterable[dict[str, Any]],
+        events: Iterable[tuple[str, dict[str, Any]]],
+        *,
+        replace_tracks: bool = False,
+    ) -> list[int]:
+        """Store fixes, upsert tracks and append events in one transaction.
+
+        Parameters
+        ----------
+        fixes : iterable of (detection_id, t_s, sensor, cls, status, body)
+        tracks : iterable of dict
+            Track rows: ``id, cls, t_start, t_end, e_min, n_min, e_max, n_max, sensors
+            (list), live (bool), body (dict)``.
+        events : iterable of (type, payload)
+            Payloads without ``seq``; each gets the next sequence number.
+        replace_tracks : bool
+            Delete every stored track first.
+
+        Returns
+        -------
+        list of int
+            The events' sequence numbers, in order.
+        """
+
+        def run(c: sqlite3.Connection) -> list[int]:
+            c.executemany(
+                "INSERT OR REPLACE INTO fixes (detection_id, t_s, sensor, cls, status, body)"
+                " VALUES (?,?,?,?,?,?)",
+                [(i, t, s, k, st, _dumps(b)) for i, t, s, k, st, b in fixes],
+            )
+            if replace_tracks:
+                c.execute("DELETE FROM tracks")
+            c.executemany(
+                "INSERT OR REPLACE INTO tracks (id, cls, t_start, t_end, e_min, n_min, e_max,"
+                " n_max, sensors, live, body) VALUES (?,?,?,?,?,?,?,?,?,?,?)",
+                [
+                    (
+                        r["id"],
+                        r["cls"],
+                        r["t_start"],
+                        r["t_end"],
+                        r["e_min"],
+                        r["n_min"],
+                        r["e_max"],
+                        r["n_max"],
+                        _dumps(r["sensors"]),
+                        int(r["live"]),
+                        _dumps(r["body"]),
+                    )
+                    for r in tracks
+                ],
+            )
+            seqs = []
+            for kind, payload in events:
+                cur = c.execute(
+                    "INSERT INTO events (type, payload) VALUES (?, ?)", (kind, _dumps(payload))
+                )
+                seqs.append(int(cur.lastrowid or 0))
+            return seqs
+
+        return self._tx(run)
+
+    # ------------------------------------------------------------------ reading
+    def _rows(self, sql: str, params: Sequence[Any] = ()) -> list[tuple[Any, ...]]:
+        with self._rlock:
+            return self._r.execute(sql, params).fetchall()
+
+    def schema_version(self) -> int:
+        """The applied schema version."""
+        return int(self._rows("SELECT version FROM schema_version")[0][0])
+
+    def counts(self) -> dict[str, int]:
+        """Rows per table."""
+        return {
+            t: int(self._rows(f"SELECT COUNT(*) FROM {t}")[0][0])  # noqa: S608  (fixed names)
+            for t in ("batches", "detections", "fixes", "tracks", "events")
+        }
+
+    def last_seq(self) -> int:
+        """The newest event's sequence number (0 when there is none)."""
+        return int(self._rows("SELECT COALESCE(MAX(seq), 0) FROM events")[0][0])
+
+    def last_times(self) -> dict[str, float]:
+        """Latest accepted detection time per sensor (s)."""
+        return {
+            s: float(t)
+            for s, t in self._rows("SELECT sensor, MAX(t_s) FROM detections GROUP BY sensor")
+        }
+
+    def sensor_counts(self) -> dict[str, int]:
+        """Accepted detections per sensor."""
+        return {
+            s: int(n)
+            for s, n in self._rows("SELECT sensor, COUNT(*) FROM detections GROUP BY sensor")
+        }
+
+    def detections(
+        self, after_id: int = 0, limit: int = 1000, *, unprocessed: bool = False
+    ) -> list[tuple[int, Detection]]:
+        """Stored detections with ``id > after_id`` in id order (optionally unprocessed only)."""
+        where = "d.id > ?" + (" AND f.detection_id IS NULL" if unprocessed else "")
+        rows = self._rows(
+            "SELECT d.id, d.t_s, d.sensor, d.u_min, d.v_min, d.u_max, d.v_max, d.cls, d.score,"
+            " d.local_id FROM detections d LEFT JOIN fixes f ON f.detection_id = d.id"
+            f" WHERE {where} ORDER BY d.id LIMIT ?",  # noqa: S608  (fixed clause)
+            (after_id, limit),
+        )
+        return [
+            (r[0], Detection(r[1], r[2], (r[3], r[4], r[5], r[6]), r[7], r[8], r[9])) for r in rows
+        ]
+
+    def fixes(self, after_id: int = 0, limit: int = 1000) -> list[dict[str, Any]]:
+        """Stored fix bodies with ``detection_id > after_id``, in detection order."""
+        rows = self._rows(
+            "SELECT body FROM fixes WHERE detection_id > ? ORDER BY detection_id LIMIT ?",
+            (after_id, limit),
+        )
+        return [json.loads(r[0]) for r in rows]
+
+    def events_since(self, seq: int, limit: int = 1000) -> list[dict[str, Any]]:
+        """Stream messages with ``seq > seq``, oldest first, ``seq`` filled in."""
+        rows = self._rows(
+            "SELECT seq, payload FROM events WHERE seq > ? ORDER BY seq LIMIT ?", (seq, limit)
+        )
+        return [{**json.loads(p), "seq": int(s)} for s, p in rows]
+
+    def tracks(
+        self,
+        *,
+        t_from: float | None = None,
+        t_to: float | None = None,
+        cls: str | None = None,
+        bbox: tuple[float, float, float, float] | None = None,
+    ) -> list[dict[str, Any]]:
+        """Track bodies overlapping a time window / class / ENU box, by id.
+
+        Only the coarse test is made here (time span and bounding box overlap); the
+        caller clips the points.
+        """
+        clauses, params = [], []
+        if t_from is not None:
+            clauses.append("t_end >= ?")
+            params.append(t_from)
+        if t_to is not None:
+            clauses.append("t_start <= ?")
+            params.append(t_to)
+        if cls is not None:
+            clauses.append("cls = ?")
+            params.append(cls)
+        if bbox is not None:
+            clauses += ["e_max >= ?", "n_max >= ?", "e_min <= ?", "n_min <= ?"]
+            params += list(bbox)
+        where = " WHERE " + " AND ".join(clauses) if clauses else ""
+        rows = self._rows(f"SELECT body FROM tracks{where} ORDER BY id", params)  # noqa: S608
+        return [json.loads(r[0]) for r in rows]

@@ -1,0 +1,253 @@
+"""WebSocket messages: pydantic models with a ``type`` discriminator.
+
+Server -> client stream messages (``fix``, ``track_update``, ``sensor_status``,
+``event``) carry ``seq``, a number that grows by one per stored message; a client that
+reconnects with ``/ws?since=N`` (or sends ``{"type": "resume", "since": N}``) is sent
+every stream message with ``seq > N`` first. Control messages (``hello``, ``pong``,
+``error``) are not stored and have ``seq: null``.
+
+Client -> server: ``ping`` and ``resume``. Anything else gets an ``error`` message and the
+connection stays up.
+
+The JSON schema of every message is exported to ``web/schema/messages.json``
+(``python -m demtrack.server.messages``); a test fails when that copy is stale.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
+
+__all__ = [
+    "AnyMessage",
+    "ClientMessage",
+    "ErrorMessage",
+    "EventMessage",
+    "FixBody",
+    "FixMessage",
+    "HelloMessage",
+    "HitBody",
+    "PingMessage",
+    "PongMessage",
+    "ResumeMessage",
+    "SCHEMA_PATH",
+    "SensorStatusMessage",
+    "ServerMessage",
+    "TrackBody",
+    "TrackPointBody",
+    "TrackUpdateMessage",
+    "client_adapter",
+    "messages_schema",
+    "schema_text",
+    "write_schema",
+]
+
+#: Where the exported schema lives, relative to the repository root.
+SCHEMA_PATH = Path("web") / "schema" / "messages.json"
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+class HitBody(_Model):
+    """One point where a viewing ray meets the ground.
+
+    ``e_m, n_m, u_m``: site frame (m). ``h_m``: above the WGS84 ellipsoid.
+    """
+
+    e_m: float
+    n_m: float
+    u_m: float
+    lat_deg: float
+    lon_deg: float
+    h_m: float
+    sigma_m: float = Field(description="1-sigma horizontal uncertainty (m)")
+
+
+class FixBody(_Model):
+    """A detection's viewing ray (bottom-centre of its box) and every terrain hit."""
+
+    detection_id: int
+    t_s: float
+    sensor: str
+    cls: Literal["vehicle", "human"]
+    score: float | None
+    bbox: tuple[float, float, float, float]
+    foot_pixel: tuple[float, float]
+    origin_enu: tuple[float, float, float]
+    direction_enu: tuple[float, float, float]
+    hits: list[HitBody] = Field(description="every terrain crossing, nearest first")
+    road_hit: HitBody | None = None
+    tracked: bool = Field(description="false when the tracker refused it (arrived too late)")
+
+
+class TrackPointBody(_Model):
+    """One estimate of a track."""
+
+    t_s: float
+    e_m: float
+    n_m: float
+    u_m: float
+    lat_deg: float
+    lon_deg: float
+    h_m: float
+    sensors: list[str]
+    detection_ids: list[int] = Field(description="the detections (fixes) behind this point")
+
+
+class TrackBody(_Model):
+    """A confirmed track, or its revised tail.
+
+    In a ``track_update`` message ``points`` holds the points from ``first_index`` on
+    (the newest ones may be revised by smoothing); a client replaces its copy from that
+    index. From ``GET /api/tracks`` it holds every point in the requested window.
+    """
+
+    id: int
+    cls: Literal["vehicle", "human"]
+    sensors: list[str]
+    gaps: list[tuple[float, float]]
+    live: bool
+    n_points: int
+    first_index: int
+    points: list[TrackPointBody]
+
+
+class FixMessage(_Model):
+    """A new fix with all its ray hits."""
+
+    type: Literal["fix"] = "fix"
+    seq: int
+    fix: FixBody
+
+
+class TrackUpdateMessage(_Model):
+    """A track was confirmed, grew, was revised or ended."""
+
+    type: Literal["track_update"] = "track_update"
+    seq: int
+    track: TrackBody
+
+
+class SensorStatusMessage(_Model):
+    """Per-sensor ingest state after a batch."""
+
+    type: Literal["sensor_status"] = "sensor_status"
+    seq: int
+    sensor: str
+    last_t_s: float | None
+    n_detections: int
+
+
+class EventMessage(_Model):
+    """A log line; ``kind``: ``ingest``, ``track_confirmed`` or ``track_ended``."""
+
+    type: Literal["event"] = "event"
+    seq: int
+    kind: str
+    t_s: float | None
+    text: str
+
+
+class HelloMessage(_Model):
+    """First message on a connection."""
+
+    type: Literal["hello"] = "hello"
+    seq: None = None
+    last_seq: int = Field(description="the newest stored stream message")
+    since: int | None = Field(description="the resume point asked for, if any")
+
+
+class PongMessage(_Model):
+    """Answer to ``ping``."""
+
+    type: Literal["pong"] = "pong"
+    seq: None = None
+    nonce: str | int | None = None
+
+
+class ErrorMessage(_Model):
+    """A client message could not be handled; the connection stays up."""
+
+    type: Literal["error"] = "error"
+    seq: None = None
+    message: str
+
+
+class PingMessage(_Model):
+    """Client -> server: answered with ``pong``."""
+
+    type: Literal["ping"]
+    nonce: str | int | None = None
+
+
+class ResumeMessage(_Model):
+    """Client -> server: send every stream message with ``seq > since``."""
+
+    type: Literal["resume"]
+    since: int = Field(ge=0)
+
+
+ServerMessage = Annotated[
+    FixMessage
+    | TrackUpdateMessage
+    | SensorStatusMessage
+    | EventMessage
+    | HelloMessage
+    | PongMessage
+    | ErrorMessage,
+    Field(discriminator="type"),
+]
+ClientMessage = Annotated[PingMessage | ResumeMessage, Field(discriminator="type")]
+AnyMessage = Annotated[
+    FixMessage
+    | TrackUpdateMessage
+    | SensorStatusMessage
+    | EventMessage
+    | HelloMessage
+    | PongMessage
+    | ErrorMessage
+    | PingMessage
+    | ResumeMessage,
+    Field(discriminator="type"),
+]
+
+_SERVER_TYPES = ["fix", "track_update", "sensor_status", "event", "hello", "pong", "error"]
+_CLIENT_TYPES = ["ping", "resume"]
+
+
+def client_adapter() -> TypeAdapter:
+    """A validator for client messages."""
+    return TypeAdapter(ClientMessage)
+
+
+def messages_schema() -> dict:
+    """The JSON schema of every message (one discriminated union)."""
+    schema = TypeAdapter(AnyMessage).json_schema()
+    schema["title"] = "demtrack WebSocket messages"
+    schema["description"] = (__doc__ or "").strip().split("\n\n")[1].replace("\n", " ")
+    schema["x-server-types"] = _SERVER_TYPES
+    schema["x-client-types"] = _CLIENT_TYPES
+    return schema
+
+
+def schema_text() -> str:
+    """The exported file's exact text."""
+    return json.dumps(messages_schema(), indent=2, sort_keys=True) + "\n"
+
+
+def write_schema(path: str | Path = SCHEMA_PATH) -> Path:
+    """Write :func:`schema_text` to ``path``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(schema_text(), encoding="utf-8")
+    return path
+
+
+if __name__ == "__main__":
+    sys.stdout.write(f"wrote {write_schema(sys.argv[1] if len(sys.argv) > 1 else SCHEMA_PATH)}\n")

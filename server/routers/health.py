@@ -1,0 +1,42 @@
+"""``/api/health``: liveness (open) and ``/api/status``: progress (reader)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import APIRouter, Depends
+
+from ..models import HealthOut
+from ..security import require_reader
+from ..state import StateDep
+
+__all__ = ["router"]
+
+router = APIRouter(prefix="/api", tags=["health"])
+
+
+@router.get("/health", response_model=HealthOut, summary="Liveness")
+def health(state: StateDep) -> dict[str, Any]:
+    """``ok`` once the site is loaded, the store open and the tracker rebuilt."""
+    return {
+        "status": "ok",
+        "schema_version": state.store.schema_version(),
+        "last_seq": state.store.last_seq(),
+    }
+
+
+@router.get(
+    "/status", response_model=HealthOut, dependencies=[Depends(require_reader)], summary="Progress"
+)
+def status(state: StateDep) -> dict[str, Any]:
+    """Row counts and stream state."""
+    counts = state.store.counts()
+    counts["ws_clients"] = len(state.hub.clients)
+    counts["ws_dropped"] = state.hub.n_dropped
+    counts["late_fixes"] = state.pipeline.n_late
+    return {
+        "status": "ok",
+        "schema_version": state.store.schema_version(),
+        "last_seq": state.store.last_seq(),
+        "counts": counts,
+    }

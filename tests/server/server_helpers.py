@@ -1,0 +1,52 @@
+"""Helpers shared by the server tests (imported by file name: tests are not a package)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from demtrack.server.app import create_app
+
+TOKEN = "test-operator-token"
+AUTH = {"Authorization": f"Bearer {TOKEN}"}
+
+
+def make_app(site: Path, tmp: Path, **overrides: Any):
+    kw: dict[str, Any] = {
+        "site": site,
+        "db_path": tmp / "console.sqlite3",
+        "token": TOKEN,
+        "warm_up": False,
+    }
+    kw.update(overrides)
+    return create_app(**kw)
+
+
+def walk(
+    sensor: str = "cam1",
+    n: int = 30,
+    t0: float = 0.0,
+    dt: float = 0.2,
+    u0: float = 520.0,
+    du: float = 4.0,
+    v: float = 520.0,
+    cls: str = "vehicle",
+) -> list[dict[str, Any]]:
+    """Detection records of one object whose foot pixel walks across the image."""
+    rng = np.random.default_rng(0)
+    out = []
+    for k in range(n):
+        u = u0 + du * k + float(rng.normal(0, 0.3))
+        out.append(
+            {
+                "t": round(t0 + dt * k, 6),
+                "sensor": sensor,
+                "bbox": [u - 20.0, v - 40.0, u + 20.0, v],
+                "class": cls,
+                "score": 0.9,
+                "local_id": f"{sensor}-{k}",
+            }
+        )
+    return out
