@@ -755,6 +755,13 @@ class Camera:
         u, v = self.intrinsics.distort(xn, yn)
         return u, v, in_front
 
+    def in_view(self, points_enu: ArrayLike) -> np.ndarray:
+        """True where a point projects into the image (in front, on the sensor), shape (n,)."""
+        u, v, in_front = self.project(points_enu)
+        ok = in_front & np.isfinite(u) & np.isfinite(v)
+        ok[ok] = self.in_image(u[ok], v[ok])
+        return ok
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready document (format ``demtrack.camera``, version 1).
 

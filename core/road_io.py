@@ -17,6 +17,7 @@ import numpy as np
 
 from .errors import InputFileError
 from .geodesy import LocalFrame
+from .geojson_io import read_features
 from .roads import RoadNetwork
 
 __all__ = ["read_roads_geojson", "roads_to_geojson", "write_roads_geojson"]
@@ -42,19 +43,11 @@ def read_roads_geojson(path: str | Path, frame: LocalFrame) -> RoadNetwork:
         If the file is missing, not JSON, not a FeatureCollection, or a feature is not a
         line with at least two finite lon/lat positions.
     """
-    path = Path(path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise InputFileError(f"cannot read road file {path}: {exc.strerror}") from None
-    except json.JSONDecodeError as exc:
-        raise InputFileError(f"road file {path} is not valid JSON: {exc.msg}") from None
-    if not isinstance(doc, dict) or doc.get("type") != "FeatureCollection":
-        raise InputFileError(f"road file {path} must be a GeoJSON FeatureCollection")
+    features = read_features(path, "road")
     coords: list[np.ndarray] = []
     names: list[str] = []
     widths: list[float] = []
-    for k, feature in enumerate(doc.get("features") or []):
+    for k, feature in enumerate(features):
         props = feature.get("properties") or {}
         for part in _lines_of(feature, k):
             try:

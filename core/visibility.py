@@ -138,20 +138,25 @@ def viewshed(
     cand = np.isfinite(dist) & (dist <= max_range_m) & (dist > 0)
     if mode == "fov":
         idx = np.flatnonzero(cand)
-        u, v, front = camera.project(targets[idx])
-        inside = front & camera.in_image(np.nan_to_num(u, nan=-1e9), np.nan_to_num(v, nan=-1e9))
-        cand[idx[~inside]] = False
+        cand[idx[~camera.in_view(targets[idx])]] = False
     else:
         cand &= _reachable(camera, mount_yaw_deg, limits or PanTiltLimits(), d)
+    return _clear_sight(dem, c, d, dist, cand).reshape(dem.grid.shape)
+
+
+def _clear_sight(
+    dem: Dem, c: np.ndarray, d: np.ndarray, dist: np.ndarray, cand: np.ndarray
+) -> np.ndarray:
+    """For the candidate sight lines ``c -> c + d``, True where no terrain is crossed."""
     idx = np.flatnonzero(cand)
-    seen = np.zeros(len(targets), bool)
+    seen = np.zeros(len(d), bool)
     if len(idx):
         reach = dist[idx] * (1.0 - _TARGET_TOL_REL) - _TARGET_TOL_M
         hits = cast_rays(
             dem, np.broadcast_to(c, (len(idx), 3)), d[idx], np.maximum(reach, 0.0), mode="first"
         )
         seen[idx] = hits.counts == 0
-    return seen.reshape(dem.grid.shape)
+    return seen
 
 
 def blind_spots(
@@ -221,13 +226,5 @@ def target_visible_fraction(
     dist = np.linalg.norm(d, axis=1)
     ok = (dist > 0) & (dist <= max_range_m)
     if in_view:
-        u, v, front = camera.project(pts)
-        ok &= front & camera.in_image(np.nan_to_num(u, nan=-1e9), np.nan_to_num(v, nan=-1e9))
-    idx = np.flatnonzero(ok)
-    if len(idx):
-        reach = dist[idx] * (1.0 - _TARGET_TOL_REL) - _TARGET_TOL_M
-        hits = cast_rays(
-            dem, np.broadcast_to(c, (len(idx), 3)), d[idx], np.maximum(reach, 0.0), mode="first"
-        )
-        ok[idx] = hits.counts == 0
-    return ok.reshape(len(feet), samples).mean(axis=1)
+        ok &= camera.in_view(pts)
+    return _clear_sight(dem, c, d, dist, ok).reshape(len(feet), samples).mean(axis=1)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +10,7 @@ import shapely
 from .activity import Zone
 from .errors import InputFileError
 from .geodesy import LocalFrame
+from .geojson_io import read_features
 
 __all__ = ["read_zones_geojson"]
 
@@ -36,17 +36,9 @@ def read_zones_geojson(path: str | Path, frame: LocalFrame) -> list[Zone]:
         Missing file, bad JSON, not a FeatureCollection, or a feature that is not a valid
         polygon.
     """
-    path = Path(path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise InputFileError(f"cannot read zone file {path}: {exc.strerror}") from None
-    except json.JSONDecodeError as exc:
-        raise InputFileError(f"zone file {path} is not valid JSON: {exc.msg}") from None
-    if not isinstance(doc, dict) or doc.get("type") != "FeatureCollection":
-        raise InputFileError(f"zone file {path} must be a GeoJSON FeatureCollection")
+    features = read_features(path, "zone")
     zones = []
-    for k, feature in enumerate(doc.get("features") or []):
+    for k, feature in enumerate(features):
         geom = (feature or {}).get("geometry") or {}
         name = str(((feature or {}).get("properties") or {}).get("name", f"zone {k + 1}"))
         if geom.get("type") == "Polygon":

@@ -415,3 +415,13 @@ def test_from_dict_rejects_malformed(change):
     change(doc)
     with pytest.raises(CameraError):
         Camera.from_dict(doc)
+
+
+def test_in_view_is_in_front_and_on_the_image():
+    from demtrack.core.camera import Camera, Intrinsics
+
+    intr = Intrinsics(100.0, 100.0, 49.5, 39.5, 100, 80)
+    cam = Camera.from_azimuth_tilt_roll(intr, [0.0, 0.0, 0.0], 0.0, 0.0, 0.0)
+    pts = np.array([[0.0, 10.0, 0.0], [0.0, -10.0, 0.0], [20.0, 10.0, 0.0], [4.9, 10.0, 3.9]])
+    # Ahead and centred; behind; far off to the side; just inside the corner.
+    assert cam.in_view(pts).tolist() == [True, False, False, True]
