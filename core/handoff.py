@@ -24,6 +24,7 @@ from .dem import Dem
 from .pantilt import wrap_deg
 from .roads import RoadNetwork
 from .site import Sensor
+from .tracking.types import TruthPath
 from .visibility import target_visible_fraction
 
 __all__ = [
@@ -233,7 +234,7 @@ class HandoffScore:
 def evaluate_handoffs(
     dem: Dem,
     sensors: Mapping[str, Sensor],
-    truths: Sequence,
+    truths: Sequence[TruthPath],
     *,
     height_m: float = 1.5,
     lead_s: float = 2.0,
@@ -242,7 +243,7 @@ def evaluate_handoffs(
     min_fraction: float = 0.5,
     roads: RoadNetwork | None = None,
 ) -> HandoffScore:
-    """Score :func:`predict_handoff` on truth paths (``t_s`` (n,), ``p_enu`` (n, 3)).
+    """Score :func:`predict_handoff` on ground-truth paths.
 
     The truth is resampled every ``dt_s``. The camera holding the target keeps it while it
     sees at least ``min_fraction`` of it; when it loses it, the camera that sees most of it
@@ -254,7 +255,7 @@ def evaluate_handoffs(
     early: list[float] = []
     for truth in truths:
         t = np.arange(truth.t_s[0], truth.t_s[-1], dt_s)
-        p = np.column_stack([np.interp(t, truth.t_s, truth.p_enu[:, k]) for k in range(3)])
+        p = truth.at(t)
         v = np.gradient(p, dt_s, axis=0)
         frac = visibility_timeline(dem, sensors, p, height_m)
         ids = list(frac)

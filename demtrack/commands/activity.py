@@ -20,7 +20,7 @@ from demtrack.core.tracking import METHODS
 from demtrack.core.zone_io import read_zones_geojson
 
 from .common import add_site_argument
-from .track import track_detections
+from .track import DEFAULT_METHOD, track_detections
 
 __all__ = ["register"]
 
@@ -29,9 +29,11 @@ def _run(args: argparse.Namespace) -> int:
     site = load_site(args.site)
     zones = read_zones_geojson(args.zones, site.frame) if args.zones else []
     tracks = track_detections(site, args.detections, args.method)
+    loiter = LoiterParams(radius_m=args.loiter_radius, min_duration_s=args.loiter_time)
+    meet = RendezvousParams(distance_m=args.meet_distance, min_duration_s=args.meet_time)
     events = (
-        detect_loitering(tracks, LoiterParams(args.loiter_radius, args.loiter_time))
-        + detect_rendezvous(tracks, RendezvousParams(args.meet_distance, 0.5, args.meet_time))
+        detect_loitering(tracks, loiter)
+        + detect_rendezvous(tracks, meet)
         + detect_convoys(tracks, ConvoyParams(min_distance_m=args.convoy_distance))
         + detect_zone_crossings(tracks, zones)
     )
@@ -55,12 +57,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("activity", help="detect loitering, rendezvous, convoys, zone crossings")
     add_site_argument(p)
     p.add_argument("--detections", required=True, type=Path, metavar="FILE")
-    p.add_argument("--method", choices=list(METHODS), default="multi-hypothesis-road")
+    p.add_argument("--method", choices=list(METHODS), default=DEFAULT_METHOD)
     p.add_argument("--zones", type=Path, metavar="ZONES.geojson", help="polygons (lon/lat)")
-    p.add_argument("--loiter-radius", type=float, default=10.0, metavar="M")
-    p.add_argument("--loiter-time", type=float, default=60.0, metavar="S")
-    p.add_argument("--meet-distance", type=float, default=5.0, metavar="M")
-    p.add_argument("--meet-time", type=float, default=20.0, metavar="S")
-    p.add_argument("--convoy-distance", type=float, default=100.0, metavar="M")
+    loiter, meet, convoy = LoiterParams(), RendezvousParams(), ConvoyParams()
+    p.add_argument("--loiter-radius", type=float, default=loiter.radius_m, metavar="M")
+    p.add_argument("--loiter-time", type=float, default=loiter.min_duration_s, metavar="S")
+    p.add_argument("--meet-distance", type=float, default=meet.distance_m, metavar="M")
+    p.add_argument("--meet-time", type=float, default=meet.min_duration_s, metavar="S")
+    p.add_argument("--convoy-distance", type=float, default=convoy.min_distance_m, metavar="M")
     p.add_argument("--json", action="store_true", help="print events as JSON")
     p.set_defaults(func=_run)

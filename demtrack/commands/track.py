@@ -15,9 +15,11 @@ from demtrack.core.tracking import METHODS, Track, run_tracker
 
 from .common import add_site_argument
 
-__all__ = ["register", "track_detections"]
+__all__ = ["DEFAULT_METHOD", "register", "track_detections"]
 
 SUFFIXES = (".geojson", ".json", ".csv", ".gpx")
+#: Tracking method used by ``track`` and ``activity`` unless ``--method`` says otherwise.
+DEFAULT_METHOD = "multi-hypothesis-road"
 
 
 def _epoch(text: str | None) -> datetime | None:
@@ -78,7 +80,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--method",
         choices=list(METHODS),
-        default="multi-hypothesis-road",
+        default=DEFAULT_METHOD,
         help="tracking method (default multi-hypothesis-road)",
     )
     p.add_argument(

@@ -1,7 +1,5 @@
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import pytest
 
@@ -11,6 +9,7 @@ from demtrack.core.grid import GridSpec
 from demtrack.core.handoff import evaluate_handoffs, predict_handoff
 from demtrack.core.pantilt import PanTiltHead
 from demtrack.core.site import Sensor
+from demtrack.core.tracking.types import TruthPath
 
 INTR = Intrinsics(320.0, 320.0, 319.5, 239.5, 640, 480)  # 90 deg horizontal field of view
 
@@ -23,12 +22,6 @@ def flat(size=200.0, cell=1.0):
 
 def sensor(sid, x, y, yaw, pan=0.0, tilt=-20.0):
     return Sensor(sid, sid, PanTiltHead([x, y, 15.0], yaw, INTR), pan, tilt)
-
-
-@dataclass
-class Truth:
-    t_s: np.ndarray
-    p_enu: np.ndarray
 
 
 def two_cameras():
@@ -74,7 +67,9 @@ def test_nobody_next_when_walking_out_of_every_cameras_range():
 def test_evaluation_counts_the_truth_handoff_and_scores_it():
     dem, cams = flat(), two_cameras()
     t = np.arange(0.0, 30.0, 0.1)
-    truth = Truth(t, np.column_stack([-60.0 + 4.0 * t, np.zeros_like(t), np.zeros_like(t)]))
+    truth = TruthPath(
+        1, "human", t, np.column_stack([-60.0 + 4.0 * t, np.zeros_like(t), np.zeros_like(t)])
+    )
     score = evaluate_handoffs(dem, cams, [truth], height_m=1.7)
     assert score.handoffs == 1 and score.correct == 1 and score.accuracy == 1.0
     assert score.early_s[0] >= 2.0
