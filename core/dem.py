@@ -13,12 +13,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .errors import DemError, InputFileError
 from .grid import GridSpec
 from .surface import bilinear_sample
+
+if TYPE_CHECKING:
+    from .raycast import RayCaster
 
 __all__ = ["Dem", "VERTICAL_DATUM_LOCAL"]
 
@@ -233,6 +237,20 @@ class Dem:
         dzdx = (self.sample(x + h, y) - self.sample(x - h, y)) / (2 * h)
         dzdy = (self.sample(x, y + h) - self.sample(x, y - h)) / (2 * h)
         return dzdx, dzdy
+
+    def ray_caster(self) -> RayCaster:
+        """Return the DEM prepared for ray casting; built on first use, then shared.
+
+        Safe to cache: a ``Dem`` is frozen and its elevation array is read-only.
+        ``cast_rays(dem, ...)`` uses it, so every caller shares one min/max pyramid.
+        """
+        cached = self.__dict__.get("_ray_caster")
+        if cached is None:
+            from .raycast import RayCaster  # numba loads only when rays are cast
+
+            cached = RayCaster.from_dem(self)
+            object.__setattr__(self, "_ray_caster", cached)
+        return cached
 
     # ------------------------------------------------------------------ GeoTIFF
     def write(self, path: str | Path) -> None:

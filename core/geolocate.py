@@ -27,7 +27,7 @@ import numpy as np
 from .camera import distortion_jacobian
 from .dem import Dem
 from .errors import CameraError
-from .raycast import RayCaster, RayStatus, cast_rays
+from .raycast import RayStatus, cast_rays
 from .roads import RoadNetwork
 from .uncertainty import hit_covariance
 
@@ -142,8 +142,6 @@ class Geolocator:
     road_max_gap_m : float
         The road rule gives no answer when the ray passes more than this far above or
         below the road at its best crossing (m).
-    caster : RayCaster, optional
-        ``dem`` already prepared for ray casting (shared between geolocators).
     """
 
     def __init__(
@@ -156,7 +154,6 @@ class Geolocator:
         max_range_m: float = 5000.0,
         road_cutoff_m: float = 1000.0,
         road_max_gap_m: float = 3.0,
-        caster: RayCaster | None = None,
     ) -> None:
         for name, value in (
             ("pixel_sigma_px", pixel_sigma_px),
@@ -173,8 +170,6 @@ class Geolocator:
         self.max_range_m = float(max_range_m)
         self.road_cutoff_m = float(road_cutoff_m)
         self.road_max_gap_m = float(road_max_gap_m)
-        # The min/max pyramid is built once per geolocator, not once per call.
-        self._caster = caster if caster is not None else RayCaster.from_dem(dem)
 
     def geolocate(
         self,
@@ -205,7 +200,7 @@ class Geolocator:
                 " image"
             )
         origins, dirs = camera.pixel_to_ray(u_arr, v_arr)
-        result = cast_rays(self._caster, origins, dirs, self.max_range_m, mode="all")
+        result = cast_rays(self.dem, origins, dirs, self.max_range_m, mode="all")
         axes, sig = _pixel_perturbations(camera, u_arr, v_arr, self.pixel_sigma_px)
         roads = self.roads
         out = []

@@ -294,7 +294,12 @@ def cast_rays(
         On an unusable DEM (no grid, shape mismatch, infinite values, smaller than 2 x 2
         or without any finite elevation).
     """
-    caster = dem if isinstance(dem, RayCaster) else RayCaster.from_dem(dem)
+    if isinstance(dem, RayCaster):
+        caster = dem
+    elif callable(getattr(dem, "ray_caster", None)):
+        caster = dem.ray_caster()  # a Dem keeps its pyramid: built once, shared
+    else:
+        caster = RayCaster.from_dem(dem)
     return caster.cast(origins, directions, max_range, mode=mode, max_hits=max_hits)
 
 

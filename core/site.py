@@ -23,7 +23,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +33,6 @@ from .errors import DemtrackError, SiteError
 from .geodesy import LocalFrame
 from .geolocate import Geolocator
 from .pantilt import PanTiltHead
-from .raycast import RayCaster
 from .road_io import read_roads_geojson
 from .roads import RoadNetwork
 
@@ -94,7 +93,6 @@ class Site:
     roads: RoadNetwork | None = None
     orthophoto_path: Path | None = None
     geoid_undulation_m: float = 0.0
-    _caster: RayCaster | None = field(default=None, init=False, repr=False)
 
     def sensor(self, sensor_id: str) -> Sensor:
         """The sensor called ``sensor_id``; :class:`SiteError` names the known ones if absent."""
@@ -105,13 +103,8 @@ class Site:
             raise SiteError(f"unknown sensor {sensor_id!r}; this site has: {known}") from None
 
     def geolocator(self, **kwargs: Any) -> Geolocator:
-        """A :class:`Geolocator` on this site's DEM, frame and roads.
-
-        Geolocators of one site share its ray-casting pyramid, built on first use.
-        """
-        if self._caster is None:
-            object.__setattr__(self, "_caster", RayCaster.from_dem(self.dem))
-        return Geolocator(self.dem, self.frame, self.roads, caster=self._caster, **kwargs)
+        """A :class:`Geolocator` on this site's DEM, frame and roads."""
+        return Geolocator(self.dem, self.frame, self.roads, **kwargs)
 
 
 def _inside(root: Path, rel: Any, key: str) -> Path:

@@ -21,7 +21,7 @@ from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
 from demtrack.core.errors import DemtrackError, SiteError
-from demtrack.core.raycast import RayCaster, warm_up
+from demtrack.core.raycast import warm_up
 from demtrack.core.site import load_site
 from demtrack.core.tracking import METHODS
 
@@ -77,7 +77,7 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     hub = Hub(settings.ws_queue_size)
     hub.bind(asyncio.get_running_loop())
     pipeline = Pipeline(site_, store, settings.tracker_method, hub.publish_threadsafe)
-    caster = await run_in_threadpool(RayCaster.from_dem, site_.dem)
+    caster = await run_in_threadpool(site_.dem.ray_caster)
     replay = await run_in_threadpool(pipeline.start)
     hub.last_seq = store.last_seq()
     log.info("replayed %(replayed)d fixes, processed %(processed)d detections", replay)

@@ -168,3 +168,15 @@ def test_constructor_validates_shapes():
         Dem(grid, np.zeros((2, 2)), variance=np.zeros((1, 1)))
     with pytest.raises(ValueError, match="positive"):
         GridSpec(0.0, 1.0, 0.0, 2, 2)
+
+
+def test_ray_caster_is_built_once_and_not_carried_into_a_changed_dem():
+    grid = GridSpec(0.0, 4.0, 1.0, 4, 4)
+    elev = np.zeros((4, 4), np.float32)
+    elev[1, 1] = np.nan
+    dem = Dem(grid, elev)
+    caster = dem.ray_caster()
+    assert dem.ray_caster() is caster
+    filled = dem.fill_holes(Dem(grid, np.ones((4, 4), np.float32)))
+    assert filled.ray_caster() is not caster
+    assert filled.ray_caster().elevation[1, 1] == 1.0
