@@ -38,6 +38,8 @@ __all__ = [
     "local_crs_wkt",
     "points_to_local",
     "read_raster_to_local",
+    "source_window",
+    "unit_m_from_tag",
     "warp_to_local",
 ]
 
@@ -335,6 +337,14 @@ _UNIT_M = {
 }
 
 
+def unit_m_from_tag(tag: str | None) -> float | None:
+    """Metres per unit for a GDAL band unit tag ("metre", "US survey foot", ...).
+
+    None for an empty or unknown tag (the caller then falls back on the CRS).
+    """
+    return _UNIT_M.get((tag or "").strip().lower())
+
+
 def read_raster_to_local(
     path: str | PathLike[str],
     frame: LocalFrame,
@@ -380,9 +390,8 @@ def read_raster_to_local(
         if kind == "elevation" and len(bands) != 1:
             raise DemError("an elevation raster is read from exactly one band")
         if z_unit_m is None and kind == "elevation":
-            unit = (ds.units[bands[0] - 1] or "").strip().lower()
-            z_unit_m = _UNIT_M.get(unit)
-        c0, r0, c1, r1 = _source_window(ds.transform, (ds.height, ds.width), src_crs, frame, grid)
+            z_unit_m = unit_m_from_tag(ds.units[bands[0] - 1])
+        c0, r0, c1, r1 = source_window(ds.transform, (ds.height, ds.width), src_crs, frame, grid)
         c0, r0 = max(c0, 0), max(r0, 0)
         c1, r1 = min(c1, ds.width), min(r1, ds.height)
         if c1 <= c0 or r1 <= r0:
@@ -405,10 +414,28 @@ def read_raster_to_local(
     )
 
 
-def _source_window(
+def source_window(
     transform: Affine, shape: tuple[int, int], src_crs: Any, frame: LocalFrame, grid: GridSpec
 ) -> tuple[int, int, int, int]:
-    """Pixel bounds ``(c0, r0, c1, r1)`` (exclusive ends) covering the grid's outline."""
+    """Pixel bounds ``(c0, r0, c1, r1)`` (exclusive ends) covering the grid's outline.
+
+    Parameters
+    ----------
+    transform : Affine
+        Source affine (pixel corners).
+    shape : (rows, cols)
+        Source shape (geographic sources wrap longitudes around its centre).
+    src_crs : CRS-like
+    frame : LocalFrame
+    grid : GridSpec
+        Target grid in the local frame.
+
+    Returns
+    -------
+    (c0, r0, c1, r1) : int
+        Unclipped pixel window with a 2-pixel margin; may lie partly or wholly outside
+        the source.
+    """
     # The ENU -> source map is a smooth bijection, so the image of the grid's outline
     # bounds the image of the whole grid.
     t = np.linspace(0.0, 1.0, 65)

@@ -77,8 +77,17 @@ def _read_las(path: Path) -> PointCloud:
 
     try:
         las = laspy.read(path)
-    except (LaspyException, OSError, ValueError) as exc:
-        raise InputFileError(f"cannot read LAS/LAZ file {path}: {exc}") from None
+    except (LaspyException, OSError, ValueError, EOFError, RuntimeError) as exc:
+        # lazrs reports a truncated LAZ stream as a RuntimeError subclass (LazrsError).
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise InputFileError(
+            f"cannot read LAS/LAZ file {path} (truncated or corrupt?): {msg}"
+        ) from None
+    if len(las.points) != las.header.point_count:
+        raise InputFileError(
+            f"LAS/LAZ file {path} is truncated: {len(las.points):,} of "
+            f"{las.header.point_count:,} points"
+        )
     try:
         crs = las.header.parse_crs()
     except Exception:  # noqa: BLE001 - a malformed CRS VLR is reported as "no CRS"

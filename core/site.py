@@ -53,7 +53,12 @@ MANIFEST = "site.json"
 
 @dataclass(frozen=True, eq=False)
 class Sensor:
-    """A camera on a pan-tilt head at its current pan and tilt."""
+    """A camera on a pan-tilt head at its current pan and tilt.
+
+    ``roll_deg`` is the camera's bank about its optical axis (0 on a levelled head; a
+    fixed camera calibrated from control points may have some), stored in ``site.json``
+    only when non-zero.
+    """
 
     id: str
     name: str
@@ -61,11 +66,20 @@ class Sensor:
     pan_deg: float
     tilt_deg: float
     image_path: Path | None = None
+    roll_deg: float = 0.0
 
     @property
     def camera(self) -> Camera:
-        """The camera at the current pan and tilt."""
-        return self.head.camera_at(self.pan_deg, self.tilt_deg)
+        """The camera at the current pan, tilt (and roll)."""
+        if self.roll_deg == 0.0:
+            return self.head.camera_at(self.pan_deg, self.tilt_deg)
+        return Camera.from_azimuth_tilt_roll(
+            self.head.intrinsics,
+            self.head.position_enu,
+            self.head.mount_yaw_deg + self.pan_deg,
+            self.tilt_deg,
+            self.roll_deg,
+        )
 
     def to_dict(self, root: Path) -> dict[str, Any]:
         """Manifest entry; the image path is written relative to ``root``."""
@@ -76,6 +90,8 @@ class Sensor:
             "pan_deg": self.pan_deg,
             "tilt_deg": self.tilt_deg,
         }
+        if self.roll_deg != 0.0:
+            out["roll_deg"] = self.roll_deg
         if self.image_path is not None:
             out["image"] = self.image_path.relative_to(root).as_posix()
         return out
@@ -144,6 +160,7 @@ def _sensor(root: Path, doc: Any, k: int) -> Sensor:
         _number(doc, "pan_deg", where, 0.0),
         _number(doc, "tilt_deg", where, 0.0),
         _inside(root, image, f"sensors[{sid}].image") if image is not None else None,
+        _number(doc, "roll_deg", where, 0.0),
     )
 
 

@@ -13,6 +13,7 @@ from . import (
     sample_site,
     scenario,
     serve,
+    site_import,
     track,
     viewshed,
 )
@@ -24,6 +25,7 @@ COMMANDS = (
     sample_site,
     geolocate,
     build_dem,
+    site_import,
     calibrate,
     scenario,
     track,

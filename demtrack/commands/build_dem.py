@@ -13,6 +13,7 @@ from demtrack.core.errors import CrsError, InputFileError
 from demtrack.core.geodesy import as_crs
 from demtrack.core.pointcloud import read_point_cloud
 from demtrack.core.site import load_site
+from demtrack.core.site_update import write_dem_atomic
 
 __all__ = ["register"]
 
@@ -70,7 +71,7 @@ def _run(args: argparse.Namespace) -> int:
             raise CrsError(f"{args.fill} is not in {args.crs}; pass --site to warp it")
         dem = dem.fill_holes(coarse_dem, coarse_sigma_m=args.fill_sigma)
     args.output.parent.mkdir(parents=True, exist_ok=True)
-    dem.write(args.output)
+    write_dem_atomic(args.output, dem)  # a failed write leaves no partial file
     g = dem.grid
     print(
         f"{args.output}: {g.ncols}x{g.nrows} cells of {g.cell_m} m from {len(pts):,} points; "

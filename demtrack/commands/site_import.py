@@ -1,0 +1,369 @@
+"""``demtrack import-dem | import-ortho | import-roads | add-camera``: build a real site.
+
+Each command reads the user's data in its own CRS, converts it exactly into the site
+frame, and writes into the site folder atomically (temporary file + rename; ``site.json``
+last), so a refused input leaves the site as it was. See ``docs/site-format.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from demtrack.core.camera import Intrinsics
+from demtrack.core.camera_pose import check_camera_on_dem, pose_from_survey
+from demtrack.core.crs_import import local_crs_wkt
+from demtrack.core.dem_import import (
+    footprint_bounds_local,
+    grid_over,
+    import_dem,
+    native_cell_m,
+    read_raster_info,
+    suggest_frame,
+)
+from demtrack.core.errors import CameraError, SiteError
+from demtrack.core.geodesy import LocalFrame, as_crs
+from demtrack.core.grid import GridSpec
+from demtrack.core.ortho_import import import_orthophoto
+from demtrack.core.orthophoto import write_orthophoto
+from demtrack.core.pantilt import PanTiltHead
+from demtrack.core.road_io import read_road_lines, read_roads_geojson, road_lines_to_geojson
+from demtrack.core.site import MANIFEST, Sensor, load_site
+from demtrack.core.site_update import (
+    new_manifest,
+    read_manifest,
+    write_atomic,
+    write_dem_atomic,
+    write_manifest,
+)
+
+__all__ = ["register"]
+
+_Z_UNITS = {"m": 1.0, "ft": 0.3048, "ftUS": 1200.0 / 3937.0}
+_MAX_ORTHO_SIDE = 8192
+
+
+def _geoid(args: argparse.Namespace, doc: dict | None) -> float:
+    """The site's N: the manifest's, or --geoid-undulation for a new site."""
+    given = args.geoid_undulation
+    if doc is None:
+        return 0.0 if given is None else float(given)
+    site_n = float(doc.get("geoid_undulation_m", 0.0))
+    if given is not None and float(given) != site_n:
+        raise SiteError(
+            f"site.json states geoid_undulation_m = {site_n} m; --geoid-undulation {given} "
+            "would disagree with what is already in the site (edit site.json to change it)"
+        )
+    return site_n
+
+
+# --------------------------------------------------------------------------- import-dem
+
+
+def _run_import_dem(args: argparse.Namespace) -> int:
+    root: Path = args.site
+    exists = (root / MANIFEST).is_file()
+    doc = read_manifest(root) if exists else None
+    infos = [read_raster_info(p) for p in args.tiles]
+    n_geoid = _geoid(args, doc)
+    n_used = n_geoid if args.vertical_datum == "orthometric" else 0.0
+    z_unit = _Z_UNITS[args.z_unit] if args.z_unit else None
+    if doc is not None:
+        if args.anchor is not None:
+            raise SiteError("--anchor is for a new site; this site already has its frame")
+        frame = load_site(root).frame
+    elif args.anchor is not None:
+        frame = LocalFrame(*args.anchor)
+    else:
+        frame = suggest_frame(infos, geoid_undulation_m=n_used, z_unit_m=z_unit)
+    old_grid = None
+    if doc is not None and args.cell is None and args.bounds is None:
+        old_grid = load_site(root).dem.grid
+    if old_grid is not None:
+        grid = old_grid
+    else:
+        cell = args.cell or round(min(native_cell_m(i, frame) for i in infos), 3)
+        bounds = tuple(args.bounds) if args.bounds else footprint_bounds_local(infos, frame)
+        grid = GridSpec.covering(*bounds, cell) if args.bounds else grid_over(bounds, cell)
+    result = import_dem(
+        args.tiles,
+        frame,
+        grid,
+        coarse=args.coarse,
+        geoid_undulation_m=n_used,
+        z_unit_m=z_unit,
+        sigma_m=args.sigma,
+        coarse_sigma_m=args.coarse_sigma,
+        crs_wkt=local_crs_wkt(frame),
+    )
+    created = not root.exists()
+    root.mkdir(parents=True, exist_ok=True)
+    try:
+        write_dem_atomic(root / "dem.tif", result.dem)
+        if doc is None:
+            doc = new_manifest(args.name or root.name, frame, n_geoid)
+        doc["dem"] = "dem.tif"
+        write_manifest(root, doc)
+    except BaseException:
+        if created and not any(root.iterdir()):
+            root.rmdir()
+        raise
+    g = grid
+    dem = result.dem
+    lo, hi = dem.elevation_range()
+    print(
+        f"{root / 'dem.tif'}: {g.ncols}x{g.nrows} cells of {g.cell_m:g} m, "
+        f"E {g.x_min:.1f} .. {g.x_max:.1f}, N {g.y_min:.1f} .. {g.y_max:.1f} m; "
+        f"Z {lo:.2f} .. {hi:.2f} m (local frame)"
+    )
+    print(
+        f"  frame anchor lat {frame.lat_deg:.7f} lon {frame.lon_deg:.7f} h {frame.h_m:.3f} m "
+        f"(WGS84 ellipsoidal){'' if exists else ', new site'}"
+    )
+    datum = (
+        f"orthometric, h = H + N with N = {n_used:.3f} m"
+        if args.vertical_datum == "orthometric"
+        else "ellipsoidal (WGS84)"
+    )
+    print(f"  source heights: {datum}")
+    for info, cells in zip(infos, result.tile_cells, strict=True):
+        unit = info.z_unit_m(z_unit)
+        print(f"  {info.path}: {info.crs_name}, height unit {unit:.10g} m, {cells:,} cells")
+    total = dem.elevation.size
+    print(
+        f"  {100 * (dem.count > 0).sum() / total:.1f} % of cells from tiles, "
+        f"{result.filled_cells:,} filled from {args.coarse or 'no coarse DEM'}, "
+        f"{result.hole_cells:,} holes"
+    )
+    return 0
+
+
+# --------------------------------------------------------------------------- import-ortho
+
+
+def _run_import_ortho(args: argparse.Namespace) -> int:
+    root: Path = args.site
+    site = load_site(root)
+    doc = read_manifest(root)
+    info = read_raster_info(args.image)
+    dem_grid = site.dem.grid
+    x0, y0, x1, y1 = dem_grid.bounds
+    cell = args.cell or round(native_cell_m(info, site.frame), 3)
+    cell = max(cell, max(x1 - x0, y1 - y0) / _MAX_ORTHO_SIDE)
+    grid = GridSpec.covering(x0, y0, x1, y1, cell)
+    result = import_orthophoto(args.image, site.frame, grid, site.dem)
+    name = doc.get("orthophoto") or "ortho.tif"
+    wkt = local_crs_wkt(site.frame)
+    write_atomic(root / name, lambda p: write_orthophoto(p, result.rgb, grid, wkt))
+    doc["orthophoto"] = name
+    write_manifest(root, doc)
+    print(
+        f"{root / name}: {grid.ncols}x{grid.nrows} cells of {grid.cell_m:g} m from "
+        f"{args.image} ({info.crs_name}); covers {100 * result.coverage:.1f} % of the site"
+    )
+    return 0
+
+
+# --------------------------------------------------------------------------- import-roads
+
+
+def _run_import_roads(args: argparse.Namespace) -> int:
+    root: Path = args.site
+    site = load_site(root)
+    doc = read_manifest(root)
+    lines = read_road_lines(args.roads, crs=args.crs, layer=args.layer)
+    name = doc.get("roads") or "roads.geojson"
+    text = json.dumps(road_lines_to_geojson(lines))
+    tmp_check = root / f".{name}.check"
+    try:
+        tmp_check.write_text(text, encoding="utf-8")
+        roads = read_roads_geojson(tmp_check, site.frame)  # the site will read it so
+    finally:
+        tmp_check.unlink(missing_ok=True)
+    write_atomic(root / name, lambda p: p.write_text(text, encoding="utf-8"))
+    doc["roads"] = name
+    write_manifest(root, doc)
+    x0, y0, x1, y1 = site.dem.grid.bounds
+    xy = np.concatenate([np.asarray(line.coords) for line in roads.lines])
+    inside = (xy[:, 0] >= x0) & (xy[:, 0] <= x1) & (xy[:, 1] >= y0) & (xy[:, 1] <= y1)
+    print(
+        f"{root / name}: {len(roads)} road line(s) from {args.roads}; "
+        f"{100 * inside.mean():.1f} % of their vertices lie on the DEM"
+    )
+    return 0
+
+
+# --------------------------------------------------------------------------- add-camera
+
+
+def _intrinsics(args: argparse.Namespace) -> Intrinsics:
+    if args.intrinsics is not None:
+        try:
+            data = json.loads(Path(args.intrinsics).read_text(encoding="utf-8"))
+        except json.JSONDecodeError as exc:
+            raise CameraError(f"{args.intrinsics} is not valid JSON: {exc.msg}") from None
+        if isinstance(data, dict) and "intrinsics" in data:
+            data = data["intrinsics"]
+        return Intrinsics.from_dict(data)
+    if args.fx is None or args.width is None or args.height is None:
+        raise CameraError("give --intrinsics FILE.json, or --fx, --width and --height")
+    w, h = args.width, args.height
+    return Intrinsics(
+        args.fx,
+        args.fy if args.fy is not None else args.fx,
+        args.cx if args.cx is not None else (w - 1) / 2.0,
+        args.cy if args.cy is not None else (h - 1) / 2.0,
+        w,
+        h,
+        args.k1,
+        args.k2,
+        args.p1,
+        args.p2,
+        args.k3,
+    )
+
+
+def _run_add_camera(args: argparse.Namespace) -> int:
+    root: Path = args.site
+    site = load_site(root)
+    doc = read_manifest(root)
+    if args.id in site.sensors and not args.replace:
+        raise SiteError(f"sensor {args.id!r} already exists; pass --replace to overwrite it")
+    intr = _intrinsics(args)
+    crs = as_crs(args.crs)
+    n_geoid = site.geoid_undulation_m if args.vertical_datum == "orthometric" else 0.0
+    x, y, z = args.position
+    pose = pose_from_survey(
+        site.frame,
+        intr,
+        x,
+        y,
+        z,
+        crs,
+        args.az,
+        args.tilt,
+        args.roll,
+        north=args.north,
+        geoid_undulation_m=n_geoid,
+    )
+    check_camera_on_dem(args.id, pose.camera.position_enu, site.dem)
+    image_rel = None
+    if args.image is not None:
+        src = Path(args.image)
+        if not src.is_file():
+            raise SiteError(f"image not found: {src}")
+        image_rel = f"images/{args.id}{src.suffix.lower()}"
+    head = PanTiltHead(pose.camera.position_enu, pose.site_az_deg - args.pan, intr)
+    sensor = Sensor(
+        args.id, args.name or args.id, head, args.pan, pose.site_tilt_deg, None, pose.site_roll_deg
+    )
+    entry = sensor.to_dict(root)
+    if image_rel is not None:
+        (root / "images").mkdir(exist_ok=True)
+        write_atomic(root / image_rel, lambda p: shutil.copyfile(args.image, p))
+        entry["image"] = image_rel
+    sensors = [s for s in doc.get("sensors", []) if s.get("id") != args.id]
+    sensors.append(entry)
+    doc["sensors"] = sensors
+    write_manifest(root, doc)
+    e, n, u = pose.camera.position_enu
+    print(
+        f"{args.id}: at E {e:.3f} N {n:.3f} U {u:.3f} m (lat {pose.lat_deg:.8f} "
+        f"lon {pose.lon_deg:.8f} h {pose.h_m:.3f} m ellipsoidal)"
+    )
+    ref = (
+        f"grid azimuth {args.az:.4f} + convergence {pose.convergence_deg:+.4f} = true "
+        f"{pose.az_true_deg:.4f} deg"
+        if args.north == "grid"
+        else f"true azimuth {pose.az_true_deg:.4f} deg"
+    )
+    print(
+        f"  {ref}; in the site frame az {pose.site_az_deg:.4f} tilt "
+        f"{pose.site_tilt_deg:.4f} roll {pose.site_roll_deg:.4f} deg"
+    )
+    return 0
+
+
+# --------------------------------------------------------------------------- parsers
+
+
+def _site(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--site", type=Path, required=True, metavar="DIR", help="site folder")
+
+
+def _datum(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument(
+        "--vertical-datum",
+        required=True,
+        choices=("ellipsoidal", "orthometric"),
+        help=f"what the {what} heights are measured from: the WGS84 ellipsoid, or the "
+        "geoid (h = H + N with the site's geoid undulation N)",
+    )
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``import-dem``, ``import-ortho``, ``import-roads`` and ``add-camera``."""
+    p = sub.add_parser("import-dem", help="warp and mosaic GeoTIFF DEM tiles (any CRS) into a site")
+    _site(p)
+    p.add_argument("tiles", type=Path, nargs="+", metavar="TILE.tif", help="first listed wins")
+    _datum(p, "tiles'")
+    p.add_argument("--coarse", type=Path, metavar="FILE", help="coarse DEM filling the holes")
+    p.add_argument("--geoid-undulation", type=float, metavar="N", help="N (m), new sites")
+    p.add_argument("--z-unit", choices=tuple(_Z_UNITS), help="height unit (default: per file)")
+    p.add_argument("--cell", type=float, metavar="M", help="cell size (default: native)")
+    p.add_argument("--bounds", type=float, nargs=4, metavar=("XMIN", "YMIN", "XMAX", "YMAX"))
+    p.add_argument(
+        "--anchor", type=float, nargs=3, metavar=("LAT", "LON", "H"), help="new site's anchor"
+    )
+    p.add_argument("--name", help="site name (new site)")
+    p.add_argument("--sigma", type=float, default=0.0, metavar="M", help="tiles' 1-sigma (m)")
+    p.add_argument(
+        "--coarse-sigma", type=float, default=1.0, metavar="M", help="coarse DEM 1-sigma"
+    )
+    p.set_defaults(func=_run_import_dem)
+
+    p = sub.add_parser("import-ortho", help="resample an RGB GeoTIFF (any CRS) onto the site")
+    _site(p)
+    p.add_argument("image", type=Path, metavar="ORTHO.tif")
+    p.add_argument("--cell", type=float, metavar="M", help="cell size (default: native)")
+    p.set_defaults(func=_run_import_ortho)
+
+    p = sub.add_parser("import-roads", help="road lines from GeoJSON or GeoPackage (any CRS)")
+    _site(p)
+    p.add_argument("roads", type=Path, metavar="ROADS.geojson|.gpkg")
+    p.add_argument("--crs", help="CRS of the coordinates (default: the file's)")
+    p.add_argument("--layer", help="GeoPackage layer")
+    p.set_defaults(func=_run_import_roads)
+
+    p = sub.add_parser("add-camera", help="add a camera surveyed in WGS84 or a projected CRS")
+    _site(p)
+    p.add_argument("--id", required=True)
+    p.add_argument("--name")
+    p.add_argument(
+        "--position", type=float, nargs=3, required=True, metavar=("X", "Y", "Z"),
+        help="optical centre: easting northing height, or lon lat height",
+    )  # fmt: skip
+    p.add_argument("--crs", default="EPSG:4979", help="CRS of --position (default EPSG:4979)")
+    _datum(p, "camera's")
+    p.add_argument("--az", type=float, required=True, metavar="DEG", help="azimuth, clockwise")
+    p.add_argument(
+        "--north", choices=("true", "grid"), default="true",
+        help="--az is from true north (default) or from the CRS's grid north",
+    )  # fmt: skip
+    p.add_argument("--tilt", type=float, required=True, metavar="DEG", help="negative = down")
+    p.add_argument("--roll", type=float, default=0.0, metavar="DEG")
+    p.add_argument("--pan", type=float, default=0.0, metavar="DEG", help="head pan reading")
+    p.add_argument("--intrinsics", metavar="FILE.json")
+    for key in ("fx", "fy", "cx", "cy"):
+        p.add_argument(f"--{key}", type=float)
+    p.add_argument("--width", type=int)
+    p.add_argument("--height", type=int)
+    for key in ("k1", "k2", "p1", "p2", "k3"):
+        p.add_argument(f"--{key}", type=float, default=0.0)
+    p.add_argument("--image", metavar="FILE", help="a still from the camera")
+    p.add_argument("--replace", action="store_true", help="overwrite a sensor of that id")
+    p.set_defaults(func=_run_add_camera)
