@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,14 @@ from demtrack.core.site import load_site
 from demtrack.core.site_update import write_dem_atomic
 
 __all__ = ["register"]
+
+
+def _source_vertical_datum(crs: object) -> str:
+    """The vertical datum of points kept in their own CRS, as the CRS states it."""
+    for sub in getattr(crs, "sub_crs_list", None) or []:
+        if sub.is_vertical:
+            return f"heights of the source points: {sub.name}"
+    return "heights of the source points (their CRS states no vertical datum)"
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -49,12 +58,16 @@ def _run(args: argparse.Namespace) -> int:
                 "site frame with --site DIR instead"
             )
         crs_wkt = crs.to_wkt()
+        vertical_datum = _source_vertical_datum(crs)
     else:
         raise CrsError(
             "the points' CRS is missing: pass --site DIR (points in the site frame, "
             "or with --crs converted into it) or --crs EPSG:XXXX"
         )
     dem = Dem.from_points(pts, args.cell, bounds=bounds, crs_wkt=crs_wkt)
+    if args.site is None:
+        # Heights stay those of the points: say so instead of claiming the site's datum.
+        dem = dataclasses.replace(dem, vertical_datum=vertical_datum)
     holes = int(dem.nodata.sum())
     if args.fill is not None:
         coarse_dem = Dem.read(args.fill)

@@ -164,6 +164,23 @@ def test_build_dem_bad_input(capsys, tmp_path, content, extra, message):
     assert status == 2 and message in err and err.count("\n") == 1
 
 
+@pytest.mark.parametrize(
+    ("crs", "datum"),
+    [
+        ("EPSG:32617", "heights of the source points (their CRS states no vertical datum)"),
+        ("EPSG:32617+5703", "heights of the source points: NAVD88 height"),
+    ],
+)
+def test_build_dem_in_the_points_crs_states_their_vertical_datum(capsys, tmp_path, crs, datum):
+    # Without --site the heights are the points' own, not the site frame's up coordinate.
+    (tmp_path / "p.csv").write_text("x,y,z\n500000,4400000,300\n500001,4400001,301\n")
+    status, _, err = run(
+        capsys, "build-dem", str(tmp_path / "p.csv"), "-o", str(tmp_path / "d.tif"), "--crs", crs
+    )
+    assert status == 0, err
+    assert Dem.read(tmp_path / "d.tif").vertical_datum == datum
+
+
 def test_demo_walks_through_the_site(capsys, sample_site_dir):
     status, out, _ = run(capsys, "demo", "--site", str(sample_site_dir))
     assert status == 0
