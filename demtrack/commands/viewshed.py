@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
@@ -40,6 +41,18 @@ def write_coverage(path: Path, count: np.ndarray, masks: dict[str, np.ndarray], 
             dst.set_band_description(k, f"seen_by_{sid}")
 
 
+#: DEMs with at least this many cells show a progress line on stderr.
+_PROGRESS_CELLS = 1_000_000
+
+
+def _progress(sensor_id: str):
+    def show(share: float) -> None:
+        end = "\n" if share >= 1.0 else ""
+        print(f"\rviewshed {sensor_id}: {100 * share:3.0f} %", end=end, file=sys.stderr)
+
+    return show
+
+
 def _run(args: argparse.Namespace) -> int:
     site = load_site(args.site)
     ids = args.sensor or list(site.sensors)
@@ -57,6 +70,8 @@ def _run(args: argparse.Namespace) -> int:
             max_range_m=args.max_range,
             mount_yaw_deg=s.head.mount_yaw_deg,
             curvature=args.curvature,
+            method=args.method,
+            progress=_progress(s.id) if site.dem.elevation.size >= _PROGRESS_CELLS else None,
         )
         area = masks[s.id].sum() * cell_area
         print(
@@ -98,6 +113,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="target point above the surface (default 1 m)",
     )
     p.add_argument("--max-range", type=float, default=1000.0, metavar="M")
+    p.add_argument(
+        "--method",
+        choices=("sweep", "exact"),
+        default="sweep",
+        help="horizon sweep with exact re-checks (default) or one exact sight line per cell",
+    )
     p.add_argument("--curvature", action="store_true", help="earth curvature and refraction")
     p.add_argument(
         "--min-area",
