@@ -18,7 +18,13 @@ import numpy as np
 from .raycast import HEIGHT_MARGIN_M, RayHits, RayStatus
 from .surface import bilinear_sample
 
-__all__ = ["cast_rays_reference", "pyramid_reference"]
+__all__ = [
+    "angular_leaves_reference",
+    "cast_rays_reference",
+    "next_candidate_reference",
+    "pseudo_angle_reference",
+    "pyramid_reference",
+]
 
 _MERGE_M = 1e-5  # crossings closer than this are one crossing found by two patches
 _WINDOW_M = 1e-6  # slack when accepting a root at a patch's stretch ends
@@ -186,3 +192,102 @@ def cast_rays_reference(
     ray_of_hit = np.repeat(np.arange(n), counts)
     points = o[ray_of_hit] + range_m[:, None] * units[ray_of_hit]
     return RayHits(offsets, range_m, points.reshape(-1, 3), status, crossed, truncated)
+
+
+# ---------------------------------------------------------------------- angular index
+def pseudo_angle_reference(dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
+    """Diamond angle in ``[0, 4)`` of grid-frame offsets (arrays), as ``core.angular_kernels``."""
+    dx = np.asarray(dx, np.float64)
+    dy = np.asarray(dy, np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(
+            dy >= 0.0,
+            np.where(dx >= 0.0, dy / (dx + dy), 1.0 + (-dx) / (dy - dx)),
+            np.where(dx < 0.0, 2.0 + (-dy) / (-dx - dy), 3.0 + dx / (dx - dy)),
+        )
+
+
+def angular_leaves_reference(
+    elevation: np.ndarray,
+    gxo: float,
+    gyo: float,
+    oz: float,
+    n_az: int,
+    d_rho: float,
+    n_r: int,
+    margin: float = HEIGHT_MARGIN_M,
+) -> np.ndarray:
+    """Leaf bounds of the angular index of origin ``(gxo, gyo, oz)``, every azimuth bin.
+
+    Plain numpy over every patch: its range span (nearest point, farthest corner), its
+    pseudo-angle span (corner extremes; split at the ``+gx`` cut; the whole circle for
+    the patch holding the origin), widened by the kernels' slacks; heights max/min into
+    each bin touched, then divided by the bin's near or far range as the sign demands.
+
+    Returns
+    -------
+    ndarray, float32, shape (n_az, n_r, 2)
+        ``[..., 0]`` max and ``[..., 1]`` min angle (m per cell); empty bins
+        ``(-inf, +inf)``, bins touching a hole ``(+inf, -inf)``.
+    """
+    from .angular_kernels import P_EPS, RHO_EPS  # the same slacks as the kernels
+
+    e = np.asarray(elevation, np.float32)
+    nrows, ncols = e.shape
+    ii, jj = np.meshgrid(np.arange(nrows - 1), np.arange(ncols - 1), indexing="ij")
+    ii, jj = ii.ravel(), jj.ravel()
+    corners = np.stack([e[ii, jj], e[ii, jj + 1], e[ii + 1, jj], e[ii + 1, jj + 1]])
+    hole = np.isnan(corners).any(axis=0)
+    hi = np.where(hole, np.inf, np.nanmax(np.where(hole, 0, corners), axis=0))
+    lo = np.where(hole, -np.inf, np.nanmin(np.where(hole, 0, corners), axis=0))
+    x0, y0 = jj - gxo, ii - gyo
+    x1, y1 = x0 + 1.0, y0 + 1.0
+    cx, cy = np.clip(0.0, x0, x1), np.clip(0.0, y0, y1)
+    rmin = np.sqrt(cx * cx + cy * cy)
+    rmax = np.sqrt(np.maximum(x0 * x0, x1 * x1) + np.maximum(y0 * y0, y1 * y1))
+    blo = np.maximum(0, np.floor((rmin - RHO_EPS) / d_rho)).astype(int)
+    bhi = np.minimum(n_r - 1, np.floor((rmax + RHO_EPS) / d_rho)).astype(int)
+    p = pseudo_angle_reference(np.stack([x0, x1, x0, x1]), np.stack([y0, y0, y1, y1]))
+    wrap = (x0 > 0) & (y0 < 0) & (y1 >= 0)
+    plo = np.where(wrap, np.minimum(p[0], p[1]) - 4.0, p.min(axis=0))
+    phi = np.where(wrap, np.maximum(p[2], p[3]), p.max(axis=0))
+    alo = np.floor((plo - P_EPS) * (n_az / 4.0)).astype(int)
+    ahi = np.floor((phi + P_EPS) * (n_az / 4.0)).astype(int)
+    full = ((x0 <= 0) & (x1 >= 0) & (y0 <= 0) & (y1 >= 0)) | (ahi - alo >= n_az)
+    alo = np.where(full, 0, alo)
+    ahi = np.where(full, n_az - 1, ahi)
+    zmax = np.full((n_az, n_r), -np.inf)
+    zmin = np.full((n_az, n_r), np.inf)
+    for k in range(len(ii)):
+        if blo[k] > bhi[k]:
+            continue
+        az = np.arange(alo[k], ahi[k] + 1) % n_az
+        sl = np.ix_(az, np.arange(blo[k], bhi[k] + 1))
+        zmax[sl] = np.maximum(zmax[sl], hi[k])
+        zmin[sl] = np.minimum(zmin[sl], lo[k])
+    r_lo = np.arange(n_r) * d_rho
+    r_hi = r_lo + d_rho
+    with np.errstate(divide="ignore", invalid="ignore"):
+        num = zmax + margin - oz
+        amax = np.where(num >= 0, np.where(r_lo > 0, num / r_lo, np.inf), num / r_hi)
+        num = zmin - margin - oz
+        amin = np.where(num >= 0, num / r_hi, np.where(r_lo > 0, num / r_lo, -np.inf))
+    empty = zmax == -np.inf
+    amax = np.where(empty, -np.inf, amax)
+    amin = np.where(empty, np.inf, amin)
+    # Outward rounding to float32.
+    fmax = amax.astype(np.float32)
+    fmax = np.where(fmax.astype(np.float64) < amax, np.nextafter(fmax, np.float32(np.inf)), fmax)
+    fmin = amin.astype(np.float32)
+    fmin = np.where(fmin.astype(np.float64) > amin, np.nextafter(fmin, np.float32(-np.inf)), fmin)
+    return np.stack([fmax, fmin], axis=-1).astype(np.float32)
+
+
+def next_candidate_reference(leaves: np.ndarray, b: int, b_end: int, s: float) -> int:
+    """First bin in ``[b, b_end]`` of ``leaves`` ((n_r, 2) max, min) holding ``s``.
+
+    ``b_end + 1`` when there is none; a linear scan.
+    """
+    ok = (leaves[b : b_end + 1, 0] >= s) & (leaves[b : b_end + 1, 1] <= s)
+    hit = np.flatnonzero(ok)
+    return int(b + hit[0]) if len(hit) else int(b_end + 1)
