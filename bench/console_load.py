@@ -1,0 +1,133 @@
+"""Console page load time on loopback (Chromium, headless) with the sample site.
+
+Starts ``demtrack serve`` on a free port with a built sample site, ingests a scenario so
+the page has tracks to load, then loads the console ``--runs`` times in fresh browser
+contexts (cold HTTP cache each time) and prints the time from navigation start (the
+browser's clock) to the page's ``data-ready`` mark (site, sensors, orthophoto, relief,
+roads, camera stills, tracks and the newest boxes loaded; the stream opening), median and
+worst. Target: under 2 s.
+
+Run: ``python -m demtrack.bench.console_load [--site DIR] [--runs 5]``. Needs
+``npm ci --prefix web`` and Debian's Chromium (``/usr/bin/chromium``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+__all__ = ["main"]
+
+_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+_TOKEN = "bench-console-token"
+
+
+def _port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _serve(site: Path, db: Path, port: int) -> subprocess.Popen:
+    import httpx2 as httpx
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "demtrack.cli", "serve", "--site", str(site), "--db", str(db)]
+        + ["--port", str(port), "--log-level", "warning"],
+        env={**os.environ, "DEMTRACK_TOKEN": _TOKEN},
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline:
+        try:
+            if httpx.get(f"http://127.0.0.1:{port}/api/health", timeout=2).status_code == 200:
+                return proc
+        except httpx.TransportError:
+            time.sleep(0.3)
+    proc.kill()
+    raise RuntimeError("the server did not start")
+
+
+def _ingest(site: Path, port: int, scenario: str) -> int:
+    import httpx2 as httpx
+
+    from demtrack.core.site import load_site
+    from demtrack.samplesite.scenarios import make_scenario
+
+    dets = make_scenario(load_site(site), scenario).detections
+    recs = [
+        {"t": d.t_s, "sensor": d.sensor, "bbox": list(d.bbox), "class": d.cls, "score": d.score}
+        for d in dets
+    ]
+    auth = {"Authorization": f"Bearer {_TOKEN}"}
+    with httpx.Client(base_url=f"http://127.0.0.1:{port}", headers=auth, timeout=120) as c:
+        for i in range(0, len(recs), 500):
+            c.post("/api/detections", json={"detections": recs[i : i + 500]}).raise_for_status()
+        return len(c.get("/api/tracks").json()["tracks"])
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Measure and print the console's load time."""
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--site", type=Path, default=None, help="built site (default: build one)")
+    p.add_argument("--runs", type=int, default=5)
+    p.add_argument("--scenario", default="vehicle-run")
+    args = p.parse_args(argv)
+    from playwright.sync_api import sync_playwright
+
+    with tempfile.TemporaryDirectory() as tmp:
+        site = args.site
+        if site is None:
+            from demtrack.samplesite.build import build_sample_site
+
+            site = build_sample_site(Path(tmp) / "site")
+        port = _port()
+        proc = _serve(site, Path(tmp) / "bench.sqlite3", port)
+        try:
+            n_tracks = _ingest(site, port, args.scenario)
+            url = f"http://127.0.0.1:{port}/?token={_TOKEN}"
+            times = []
+            with sync_playwright() as pw:
+                browser = pw.chromium.launch(
+                    executable_path="/usr/bin/chromium", headless=True, args=_ARGS
+                )
+                for k in range(args.runs + 1):  # the first run warms the server's caches
+                    ctx = browser.new_context(viewport={"width": 1280, "height": 800})
+                    page = ctx.new_page()
+                    page.goto(url)
+                    page.wait_for_selector("body[data-ready='1']", timeout=120_000)
+                    dt = page.evaluate("window.demtrack.ui.readyMs") / 1000.0
+                    if k:
+                        times.append(dt)
+                    else:
+                        print(f"first load (server renders and caches the images): {dt:.2f} s")
+                    ctx.close()
+                browser.close()
+        finally:
+            proc.terminate()
+            proc.wait(30)
+    print(
+        f"console load on loopback, {n_tracks} tracks ({args.scenario}), {args.runs} runs:"
+        f" median {statistics.median(times):.2f} s, worst {max(times):.2f} s (target < 2 s)"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

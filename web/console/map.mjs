@@ -1,0 +1,414 @@
+// The site map: OpenLayers in the site's local projection (east/north metres).
+//
+// The orthophoto and the DEM relief are images on the site grid, so they are static image
+// layers over their grids' outer bounds; everything else (roads, sensors, footprints,
+// tracks, geolocation hits, markers) is drawn from site-frame coordinates directly.
+
+/* global ol */
+import { classColour, HIT_COLOUR, SELECTED_COLOUR } from "./util.mjs";
+import { lastIndexAtOrBefore, positionAt } from "./store.mjs";
+
+const EVENT_COLOURS = {
+  track_confirmed: "#70ff70",
+  track_ended: "#ff5050",
+  handoff: "#5aa0ff",
+  "zone-enter": "#ffffff",
+  "zone-leave": "#ffffff",
+};
+const TRAIL_S = 30; // seconds of trail behind each live position
+const HOLD_LIVE_S = 10;
+const HOLD_ENDED_S = 2;
+
+function stroke(color, width, lineDash) {
+  return new ol.style.Stroke({ color, width, lineDash });
+}
+
+function circle(radius, fill, strokeColor = "#000", strokeWidth = 1.5) {
+  return new ol.style.Circle({
+    radius,
+    fill: new ol.style.Fill({ color: fill }),
+    stroke: stroke(strokeColor, strokeWidth),
+  });
+}
+
+/** ``#rrggbb`` blended half-way to white. */
+function fade(hex) {
+  const n = parseInt(hex.slice(1), 16);
+  const mix = (c) => Math.round(c + 0.45 * (255 - c));
+  return `rgb(${mix(n >> 16)},${mix((n >> 8) & 255)},${mix(n & 255)})`;
+}
+
+function label(text, color = "#fff", offsetY = -14, font = "bold 12px system-ui, sans-serif") {
+  return new ol.style.Text({
+    text,
+    font,
+    offsetY,
+    fill: new ol.style.Fill({ color }),
+    stroke: stroke("rgba(0,0,0,0.85)", 3),
+  });
+}
+
+function vectorLayer(name, title, zIndex, style, extra = {}) {
+  const layer = new ol.layer.Vector({ source: new ol.source.Vector(), style, zIndex, ...extra });
+  layer.set("name", name);
+  layer.set("title", title);
+  return layer;
+}
+
+/** A north arrow: the map's y axis is true north and the view never rotates. */
+function northArrow() {
+  const div = document.createElement("div");
+  div.className = "north-arrow ol-unselectable ol-control";
+  div.title = "North (site frame y axis = true north)";
+  div.innerHTML =
+    '<svg viewBox="0 0 24 34" width="24" height="34" aria-label="north arrow">' +
+    '<polygon points="12,2 20,26 12,20 4,26" fill="#fff" stroke="#000" stroke-width="1.2"/>' +
+    '<polygon points="12,2 12,20 4,26" fill="#222"/>' +
+    '<text x="12" y="33" text-anchor="middle" font-size="9" font-weight="bold" fill="#fff">N</text></svg>';
+  return new ol.control.Control({ element: div });
+}
+
+export class SiteMap {
+  constructor(target, site) {
+    this.site = site;
+    const b = site.dem.bounds_enu;
+    const pad = 0.05 * Math.max(b[2] - b[0], b[3] - b[1]);
+    this.extent = [b[0] - pad, b[1] - pad, b[2] + pad, b[3] + pad];
+    this.proj = new ol.proj.Projection({ code: "DEMTRACK:ENU", units: "m", extent: this.extent });
+    ol.proj.addProjection(this.proj);
+
+    this.ortho = new ol.layer.Image({ zIndex: 0 });
+    this.ortho.set("name", "orthophoto");
+    this.ortho.set("title", "Orthophoto");
+    this.relief = new ol.layer.Image({ zIndex: 1, opacity: 0.3 });
+    this.relief.set("name", "relief");
+    this.relief.set("title", "DEM relief");
+
+    this.coverage = vectorLayer("coverage", "Camera coverage", 2, (f) => this.coverageStyle(f));
+    this.roads = vectorLayer("roads", "Roads", 3, (f, res) => this.roadStyle(f, res));
+    this.synopsis = vectorLayer("synopsis", "Trajectories (window)", 4, (f) => this.synopsisStyle(f));
+    this.trails = vectorLayer("tracks", "Live tracks", 6, (f) => this.trackStyle(f), {
+      updateWhileAnimating: true,
+      updateWhileInteracting: true,
+    });
+    this.sensors = vectorLayer("sensors", "Sensors", 7, (f) => this.sensorStyle(f));
+    this.events = vectorLayer("events", "Events", 8, (f) => this.eventStyle(f));
+    this.geo = vectorLayer("geolocation", "Geolocation hits", 9, (f) => this.geoStyle(f));
+    this.markers = vectorLayer("markers", "Markers", 10, (f) => this.markerStyle(f));
+    this.selectedId = null;
+
+    this.view = new ol.View({
+      projection: this.proj,
+      extent: this.extent,
+      constrainOnlyCenter: true,
+      enableRotation: false,
+      maxZoom: 28,
+    });
+    this.map = new ol.Map({
+      target,
+      layers: [this.ortho, this.relief, this.coverage, this.roads, this.synopsis, this.trails,
+        this.sensors, this.events, this.geo, this.markers],
+      view: this.view,
+      controls: ol.control.defaults
+        .defaults({ rotate: false, attribution: false })
+        .extend([new ol.control.ScaleLine({ units: "metric", bar: true, steps: 4, text: true, minWidth: 100 }), northArrow()]),
+    });
+    this.view.fit([b[0], b[1], b[2], b[3]], { padding: [10, 10, 10, 10] });
+  }
+
+  /** The layers the layer list shows, top first. */
+  layerList() {
+    return [this.markers, this.geo, this.events, this.sensors, this.trails, this.synopsis,
+      this.roads, this.coverage, this.relief, this.ortho];
+  }
+
+  setImage(layer, url, bounds) {
+    layer.setSource(url ? new ol.source.ImageStatic({ url, imageExtent: bounds, projection: this.proj, interpolate: true }) : null);
+  }
+
+  // ------------------------------------------------------------------ static layers
+  setRoads(geojson) {
+    const src = this.roads.getSource();
+    src.clear();
+    for (const f of geojson.features || []) {
+      const feat = new ol.Feature(new ol.geom.LineString(f.geometry.coordinates));
+      feat.set("width_m", f.properties.width_m || 6);
+      feat.set("name", f.properties.name || "");
+      src.addFeature(feat);
+    }
+  }
+
+  setSensors(sensors) {
+    this.sensorList = sensors;
+    const pts = this.sensors.getSource();
+    const cov = this.coverage.getSource();
+    pts.clear();
+    cov.clear();
+    for (const s of sensors) {
+      const p = new ol.Feature(new ol.geom.Point([s.position_enu[0], s.position_enu[1]]));
+      p.set("sensor", s.id);
+      p.set("name", s.name);
+      pts.addFeature(p);
+      const ring = (s.footprint?.enu || []).map((q) => [q[0], q[1]]);
+      if (ring.length >= 3) {
+        ring.push(ring[0]);
+        const poly = new ol.Feature(new ol.geom.Polygon([ring]));
+        poly.set("sensor", s.id);
+        cov.addFeature(poly);
+        const ray = new ol.Feature(new ol.geom.LineString([[s.position_enu[0], s.position_enu[1]], ring[0]]));
+        ray.set("sensor", s.id);
+      }
+    }
+  }
+
+  // ------------------------------------------------------------------ dynamic layers
+  /** Tracks at time `t`: current position, a trail behind it, id label. */
+  drawTracks(tracks, t, visible) {
+    const src = this.trails.getSource();
+    src.clear(true);
+    const feats = [];
+    for (const tr of tracks) {
+      if (!visible(tr)) continue;
+      const pts = tr.points;
+      if (!pts.length) continue;
+      let pos = positionAt(tr, t);
+      const tEnd = pts[pts.length - 1].t_s;
+      // A track whose newest point is a moment older than the shown time keeps its head
+      // there (other sensors' newer fixes set the clock), ended tracks only briefly.
+      if (!pos && t > tEnd && t - tEnd <= (tr.live ? HOLD_LIVE_S : HOLD_ENDED_S)) pos = pts[pts.length - 1];
+      // Trails: the points in (t - TRAIL_S, t], then the interpolated position.
+      const iEnd = lastIndexAtOrBefore(pts, t);
+      if (iEnd < 0) continue;
+      let i0 = iEnd;
+      while (i0 > 0 && pts[i0 - 1].t_s > t - TRAIL_S) i0 -= 1;
+      const coords = [];
+      for (let i = i0; i <= iEnd; i += 1) coords.push([pts[i].e_m, pts[i].n_m]);
+      if (pos) coords.push([pos.e_m, pos.n_m]);
+      if (coords.length >= 2) {
+        const f = new ol.Feature(new ol.geom.LineString(coords));
+        f.set("trackId", tr.id);
+        f.set("cls", tr.cls);
+        f.set("kind", "trail");
+        feats.push(f);
+      }
+      if (pos) {
+        const f = new ol.Feature(new ol.geom.Point([pos.e_m, pos.n_m]));
+        f.set("trackId", tr.id);
+        f.set("cls", tr.cls);
+        f.set("kind", "head");
+        f.set("live", tr.live && t >= tEnd - 1e-6);
+        feats.push(f);
+      }
+    }
+    src.addFeatures(feats);
+  }
+
+  /**
+   * Long-term trajectories of a window, solid where tracked, dashed across gaps.
+   * @param {Array} trajs  [{id, cls, sensors, parts: [{gap: bool, coords: [[e, n], ...]}]}]
+   */
+  drawSynopsis(trajs, visible) {
+    const src = this.synopsis.getSource();
+    src.clear(true);
+    const feats = [];
+    for (const tr of trajs) {
+      if (!visible(tr) || !tr.parts.length) continue;
+      for (const part of tr.parts) {
+        if (part.coords.length < 2) continue;
+        const f = new ol.Feature(new ol.geom.LineString(part.coords));
+        f.setProperties({ trackId: tr.id, cls: tr.cls, gap: part.gap });
+        feats.push(f);
+      }
+      const first = tr.parts[0].coords[0];
+      const lastPart = tr.parts[tr.parts.length - 1].coords;
+      const a = new ol.Feature(new ol.geom.Point(first));
+      a.setProperties({ trackId: tr.id, cls: tr.cls, end: "start" });
+      const z = new ol.Feature(new ol.geom.Point(lastPart[lastPart.length - 1]));
+      z.setProperties({ trackId: tr.id, cls: tr.cls, end: "end" });
+      feats.push(a, z);
+    }
+    src.addFeatures(feats);
+  }
+
+  drawEvents(items) {
+    const src = this.events.getSource();
+    src.clear(true);
+    src.addFeatures(items.map((ev) => {
+      const f = new ol.Feature(new ol.geom.Point([ev.e_m, ev.n_m]));
+      f.set("kind", ev.kind);
+      return f;
+    }));
+  }
+
+  /** A geolocation answer: the ray's ground trace, every hit, the chosen ones, the road point. */
+  drawGeolocation(result, sensor) {
+    const src = this.geo.getSource();
+    src.clear(true);
+    if (!result) return;
+    const feats = [];
+    const chosen = new Set((result.selected || []).map((h) => `${h.e_m},${h.n_m}`));
+    const all = [...(result.hits || [])];
+    if (result.road) all.push({ ...result.road, source: "road" });
+    if (sensor) {
+      const far = all.length ? all.reduce((a, h) => (h.range_m > a.range_m ? h : a)) : null;
+      const d = result.ray.direction_enu;
+      const o = result.ray.origin_enu;
+      const end = far ? [far.e_m, far.n_m] : [o[0] + 300 * d[0], o[1] + 300 * d[1]];
+      const ray = new ol.Feature(new ol.geom.LineString([[o[0], o[1]], end]));
+      ray.set("kind", "ray");
+      feats.push(ray);
+    }
+    all.forEach((h, k) => {
+      const f = new ol.Feature(new ol.geom.Point([h.e_m, h.n_m]));
+      f.set("kind", h.source === "road" ? "road" : "hit");
+      f.set("chosen", chosen.has(`${h.e_m},${h.n_m}`));
+      f.set("label", h.source === "road" ? "road" : String(k + 1));
+      f.set("sigma", h.sigma_m);
+      feats.push(f);
+      if (chosen.has(`${h.e_m},${h.n_m}`) && h.sigma_m > 0) {
+        const c = new ol.Feature(new ol.geom.Circle([h.e_m, h.n_m], h.sigma_m));
+        c.set("kind", "sigma");
+        feats.push(c);
+      }
+    });
+    src.addFeatures(feats);
+  }
+
+  drawMarkers(markers) {
+    const src = this.markers.getSource();
+    src.clear(true);
+    src.addFeatures(markers.map((m) => {
+      const f = new ol.Feature(new ol.geom.Point([m.e_m, m.n_m]));
+      f.set("name", m.name);
+      return f;
+    }));
+  }
+
+  // -------------------------------------------------------------------------- styles
+  roadStyle(f, res) {
+    const w = Math.max(2, Math.min(14, f.get("width_m") / res));
+    return [
+      new ol.style.Style({ stroke: stroke("rgba(40,40,40,0.8)", w + 2) }),
+      new ol.style.Style({ stroke: stroke("rgba(245,235,200,0.9)", w) }),
+    ];
+  }
+
+  coverageStyle() {
+    return new ol.style.Style({
+      fill: new ol.style.Fill({ color: "rgba(120,200,255,0.16)" }),
+      stroke: stroke("rgba(140,210,255,0.9)", 1.5, [6, 4]),
+    });
+  }
+
+  sensorStyle(f) {
+    return new ol.style.Style({
+      image: new ol.style.RegularShape({
+        points: 3,
+        radius: 9,
+        fill: new ol.style.Fill({ color: "#7fdcff" }),
+        stroke: stroke("#00202c", 2),
+      }),
+      text: label(f.get("sensor"), "#d8f5ff", -16),
+    });
+  }
+
+  trackStyle(f) {
+    const sel = f.get("trackId") === this.selectedId;
+    const colour = classColour(f.get("cls"));
+    if (f.get("kind") === "trail") {
+      return [
+        new ol.style.Style({ stroke: stroke("rgba(0,0,0,0.6)", sel ? 6 : 4.5) }),
+        new ol.style.Style({ stroke: stroke(sel ? SELECTED_COLOUR : colour, sel ? 3.5 : 2.5) }),
+      ];
+    }
+    return new ol.style.Style({
+      image: circle(sel ? 8 : 6, sel ? SELECTED_COLOUR : colour, "#000", 2),
+      text: label(String(f.get("trackId")), sel ? SELECTED_COLOUR : "#fff", -15),
+    });
+  }
+
+  synopsisStyle(f) {
+    const sel = f.get("trackId") === this.selectedId;
+    const colour = sel ? SELECTED_COLOUR : classColour(f.get("cls"));
+    if (f.get("end")) {
+      return new ol.style.Style({
+        image: f.get("end") === "start"
+          ? circle(4, "#fff", colour, 2)
+          : new ol.style.RegularShape({ points: 4, radius: 5, angle: Math.PI / 4, fill: new ol.style.Fill({ color: colour }), stroke: stroke("#000", 1) }),
+        text: f.get("end") === "start" ? label(String(f.get("trackId")), colour, -12, "11px system-ui, sans-serif") : undefined,
+      });
+    }
+    // Thinner and lighter than the live trails, which are drawn over them.
+    const dash = f.get("gap") ? [7, 6] : undefined;
+    return [
+      new ol.style.Style({ stroke: stroke("rgba(0,0,0,0.45)", sel ? 5 : 3.5, dash) }),
+      new ol.style.Style({ stroke: stroke(sel ? colour : fade(colour), sel ? 3 : 1.6, dash) }),
+    ];
+  }
+
+  eventStyle(f) {
+    const kind = f.get("kind");
+    const colour = EVENT_COLOURS[kind] || "#b07cff";
+    const ended = kind === "track_ended";
+    return new ol.style.Style({
+      image: new ol.style.RegularShape({
+        points: ended ? 4 : 5,
+        radius: ended ? 6 : 7,
+        radius2: ended ? undefined : 3,
+        angle: ended ? Math.PI / 4 : 0,
+        fill: new ol.style.Fill({ color: colour }),
+        stroke: stroke("#000", 1),
+      }),
+    });
+  }
+
+  geoStyle(f) {
+    const kind = f.get("kind");
+    if (kind === "ray") return new ol.style.Style({ stroke: stroke(HIT_COLOUR, 2, [4, 4]) });
+    if (kind === "sigma") {
+      return new ol.style.Style({
+        fill: new ol.style.Fill({ color: "rgba(255,230,0,0.15)" }),
+        stroke: stroke(SELECTED_COLOUR, 1.5),
+      });
+    }
+    const chosen = f.get("chosen");
+    return new ol.style.Style({
+      image: chosen
+        ? circle(8, SELECTED_COLOUR, "#000", 2)
+        : kind === "road" ? circle(5, "#ffffff", HIT_COLOUR, 2) : circle(5, HIT_COLOUR, "#000", 1.5),
+      text: label(f.get("label"), chosen ? SELECTED_COLOUR : "#ffd6f6", -14),
+      zIndex: chosen ? 2 : 1,
+    });
+  }
+
+  markerStyle(f) {
+    return new ol.style.Style({
+      image: new ol.style.RegularShape({
+        points: 4, radius: 8, angle: Math.PI / 4,
+        fill: new ol.style.Fill({ color: "#ffffff" }),
+        stroke: stroke("#d00000", 3),
+      }),
+      text: label(f.get("name"), "#ffffff", -16),
+    });
+  }
+
+  // ------------------------------------------------------------------------- helpers
+  /** The track under a map pixel, if any. */
+  trackAt(pixel) {
+    let found = null;
+    this.map.forEachFeatureAtPixel(pixel, (f) => {
+      const id = f.get("trackId");
+      if (id !== undefined && found === null) found = id;
+    }, { hitTolerance: 6, layerFilter: (l) => l === this.trails || l === this.synopsis });
+    return found;
+  }
+
+  centreOn(e, n) {
+    this.view.setCenter([e, n]);
+  }
+
+  /** Pixel on the page of a site point (for tests and overlays). */
+  pixelOf(e, n) {
+    return this.map.getPixelFromCoordinate([e, n]);
+  }
+}

@@ -1,0 +1,59 @@
+// Small shared helpers: class colours, number and time formatting, DOM shortcuts.
+
+export const CLASS_COLOURS = {
+  vehicle: "#ff7a1a",
+  human: "#1ad0ff",
+};
+export const SELECTED_COLOUR = "#ffe600";
+export const HIT_COLOUR = "#ff2bd6";
+
+export function classColour(cls) {
+  return CLASS_COLOURS[cls] || "#cccccc";
+}
+
+export function $(sel, root = document) {
+  return root.querySelector(sel);
+}
+
+export function el(tag, attrs = {}, ...children) {
+  const e = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) {
+    if (k === "class") e.className = v;
+    else if (k === "text") e.textContent = v;
+    else if (k.startsWith("on")) e.addEventListener(k.slice(2), v);
+    else if (v !== undefined && v !== null && v !== false) e.setAttribute(k, v === true ? "" : v);
+  }
+  for (const c of children) if (c !== null && c !== undefined) e.append(c);
+  return e;
+}
+
+/** Session time as T+mm:ss.s (seconds since the session's start). */
+export function fmtT(t) {
+  if (t === null || t === undefined || !Number.isFinite(t)) return "–";
+  const sign = t < 0 ? "-" : "";
+  const a = Math.abs(t);
+  const m = Math.floor(a / 60);
+  const s = a - 60 * m;
+  return `${sign}${String(m).padStart(2, "0")}:${s.toFixed(1).padStart(4, "0")}`;
+}
+
+export function fmt(x, digits = 2) {
+  if (x === null || x === undefined || !Number.isFinite(x)) return "–";
+  const s = x.toFixed(digits);
+  return /^-0\.?0*$/.test(s) ? s.slice(1) : s;
+}
+
+export function download(name, mime, text) {
+  const blob = new Blob([text], { type: mime });
+  const a = el("a", { href: URL.createObjectURL(blob), download: name });
+  document.body.append(a);
+  a.click();
+  setTimeout(() => {
+    URL.revokeObjectURL(a.href);
+    a.remove();
+  }, 1000);
+}
+
+export function escapeXml(s) {
+  return String(s).replace(/[<>&'"]/g, (c) => ({ "<": "&lt;", ">": "&gt;", "&": "&amp;", "'": "&apos;", '"': "&quot;" })[c]);
+}
