@@ -42,10 +42,10 @@ def bilinear_sample(values: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> np.nd
     t = y - r
     c1 = np.minimum(c + 1, ncols - 1)
     r1 = np.minimum(r + 1, nrows - 1)
-    v = values.astype(np.float64, copy=False)
-    z00 = v[r, c]
-    z01 = v[r, c1]
-    z10 = v[r1, c]
-    z11 = v[r1, c1]
+    # Gather, then widen: widening the whole grid first would copy it on every call.
+    z00 = values[r, c].astype(np.float64)
+    z01 = values[r, c1].astype(np.float64)
+    z10 = values[r1, c].astype(np.float64)
+    z11 = values[r1, c1].astype(np.float64)
     out[inside] = z00 * (1 - s) * (1 - t) + z01 * s * (1 - t) + z10 * (1 - s) * t + z11 * s * t
     return out

@@ -8,11 +8,15 @@ replay and the numba warm-up happen in the lifespan, when the server starts.
 from __future__ import annotations
 
 import asyncio
+import json
 import logging
+import threading
+import time
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Any
 
+import numpy as np
 from fastapi import Depends, FastAPI, Request
 from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
@@ -20,15 +24,28 @@ from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
+from demtrack.core.camera import undistort_normalized_nb
 from demtrack.core.errors import DemtrackError, SiteError
 from demtrack.core.raycast import warm_up
-from demtrack.core.site import load_site
+from demtrack.core.site import Site, load_site
 from demtrack.core.tracking import METHODS
 
 from .db import Store
 from .hub import Hub
-from .pipeline import Pipeline
-from .routers import detections, geolocate, health, sensors, site, stream, tracks
+from .pipeline import Pipeline, Publisher, pipeline_options
+from .replay import Replay, scenario_stream, start_time_after
+from .routers import (
+    detections,
+    events,
+    geolocate,
+    health,
+    sensors,
+    site,
+    stream,
+    synopsis,
+    tracks,
+    web,
+)
 from .security import require_reader, resolve_token
 from .settings import Settings
 from .state import ConsoleState
@@ -65,26 +82,102 @@ def _check(settings: Settings) -> None:
         raise DemtrackError(
             f"unknown tracker method {settings.tracker_method!r}; known: {', '.join(METHODS)}"
         )
+    if settings.replay:
+        try:
+            doc = json.loads((settings.site / "site.json").read_text("utf-8"))
+        except (OSError, ValueError):
+            return  # create_app reports the missing or broken site itself
+        if not isinstance(doc, dict) or "seed" not in (doc.get("generator") or {}):
+            raise SiteError(
+                f"cannot replay {', '.join(settings.replay)}: {settings.site} is not a"
+                " generated sample site (demtrack sample-site makes one)"
+            )
+
+
+def _warm_kernels(done: threading.Event) -> None:
+    """Compile (or load from numba's cache) the kernels requests use, then set ``done``.
+
+    Run in a thread at start-up: from the on-disk cache this takes about a second; a cold
+    compile takes minutes of CPU on two cores, and the first page, the site and the
+    imagery are served meanwhile (a request that casts rays waits for its kernel).
+    """
+    t0 = time.perf_counter()
+    try:
+        warm_up()
+        undistort_normalized_nb(np.array([0.1]), np.array([0.1]), -0.04, 0.0, 0.0, 0.0, 0.0)
+        log.info("ray-casting kernels ready in %.1f s", time.perf_counter() - t0)
+    except Exception:  # noqa: BLE001 - a failed warm-up only costs the first request time
+        log.exception("kernel warm-up failed")
+    finally:
+        done.set()
+
+
+def _fan_out(publishers: list[Publisher]) -> Publisher:
+    """One publisher that hands each batch of messages to every subscriber in turn."""
+
+    def publish(messages: list[dict[str, Any]]) -> None:
+        for p in publishers:
+            p(messages)
+
+    return publish
+
+
+def _start_scene(site_: Site, settings: Settings) -> Any:
+    from .scene3d import Scene3D
+
+    return Scene3D(
+        site_, host=settings.viser_host, port=settings.viser_port, max_rays=settings.scene3d_rays
+    )
+
+
+def _start_replay(site_: Site, store: Store, pipeline: Pipeline, settings: Settings) -> Replay:
+    t0 = start_time_after(store.last_times())
+    names = list(settings.replay)
+    replay = Replay(
+        lambda: scenario_stream(site_, names, t0, loop=settings.replay_loop),
+        pipeline.ingest,
+        speed=settings.replay_speed,
+    )
+    log.info("replaying %s from t = %.0f s at %g x", ", ".join(names), t0, settings.replay_speed)
+    return replay.start()
 
 
 @asynccontextmanager
 async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     settings: Settings = app.state.settings
-    if settings.warm_up:
-        await run_in_threadpool(warm_up)
+    app.state.warm = threading.Event()
+    if settings.warm_up:  # compiles in the background: the first page need not wait for it
+        threading.Thread(
+            target=_warm_kernels, args=(app.state.warm,), name="demtrack-warm-up", daemon=True
+        ).start()
+    else:
+        app.state.warm.set()
     site_ = await run_in_threadpool(load_site, settings.site)
     store = Store(settings.resolved_db_path)
     hub = Hub(settings.ws_queue_size)
     hub.bind(asyncio.get_running_loop())
-    pipeline = Pipeline(site_, store, settings.tracker_method, hub.publish_threadsafe)
+    scene = await run_in_threadpool(_start_scene, site_, settings) if settings.scene3d else None
+    app.state.scene3d = scene
+    app.state.viser_url = None if scene is None else scene.url
+    subscribers: list[Publisher] = [hub.publish_threadsafe]
+    if scene is not None:
+        subscribers.append(scene.publish)  # the 3D scene follows the same stream as /ws
+    pipeline = Pipeline(
+        site_, store, settings.tracker_method, _fan_out(subscribers), **pipeline_options(settings)
+    )
     caster = await run_in_threadpool(site_.dem.ray_caster)
-    replay = await run_in_threadpool(pipeline.start)
+    counts = await run_in_threadpool(pipeline.start)
     hub.last_seq = store.last_seq()
-    log.info("replayed %(replayed)d fixes, processed %(processed)d detections", replay)
+    log.info("replayed %(replayed)d fixes, processed %(processed)d detections", counts)
     app.state.console = ConsoleState(settings, site_, store, hub, pipeline, caster)
+    app.state.replay = _start_replay(site_, store, pipeline, settings) if settings.replay else None
     try:
         yield
     finally:
+        if app.state.replay is not None:  # before the store closes: it ingests
+            await run_in_threadpool(app.state.replay.stop)
+        if scene is not None:
+            await run_in_threadpool(scene.stop)
         hub.bind(None)  # type: ignore[arg-type]
         store.close()
 
@@ -138,5 +231,8 @@ def create_app(settings: Settings | None = None, **overrides: Any) -> FastAPI:
     app.include_router(geolocate.router, dependencies=reader)
     app.include_router(detections.router)
     app.include_router(tracks.router, dependencies=reader)
+    app.include_router(synopsis.router, dependencies=reader)
+    app.include_router(events.router, dependencies=reader)
     app.include_router(stream.router)
+    app.include_router(web.router)
     return app

@@ -13,6 +13,9 @@ Tables
 ``fixes``           one per processed detection (derived: ray, every hit, status)
 ``tracks``          the tracker's tracks (derived; rewritten on start-up replay)
 ``events``          the WebSocket stream, ``seq`` = its sequence number
+``activity``        detected events (loitering, rendezvous, convoy, zone crossings,
+                    hand-off predictions, tracks confirmed / ended), one row per episode,
+                    updated while it lasts (migration 2)
 """
 
 from __future__ import annotations
@@ -86,8 +89,28 @@ def _m1_initial(conn: sqlite3.Connection) -> None:
     )
 
 
+def _m2_activity(conn: sqlite3.Connection) -> None:
+    _run_script(
+        conn,
+        """
+        CREATE TABLE activity (
+            id INTEGER PRIMARY KEY,
+            key TEXT NOT NULL UNIQUE,
+            kind TEXT NOT NULL,
+            t_start REAL NOT NULL,
+            t_end REAL NOT NULL,
+            track_ids TEXT NOT NULL,
+            open INTEGER NOT NULL,
+            body TEXT NOT NULL
+        );
+        CREATE INDEX activity_t ON activity(t_start, t_end);
+        CREATE INDEX activity_kind ON activity(kind, t_start)
+        """,
+    )
+
+
 #: Ordered migrations; applying ``MIGRATIONS[k]`` takes the schema from version k to k + 1.
-MIGRATIONS: tuple[Callable[[sqlite3.Connection], None], ...] = (_m1_initial,)
+MIGRATIONS: tuple[Callable[[sqlite3.Connection], None], ...] = (_m1_initial, _m2_activity)
 SCHEMA_VERSION = len(MIGRATIONS)
 
 
@@ -228,8 +251,9 @@ class Store:
         events: Iterable[tuple[str, dict[str, Any]]],
         *,
         replace_tracks: bool = False,
+        activity: Iterable[dict[str, Any]] = (),
     ) -> list[int]:
-        """Store fixes, upsert tracks and append events in one transaction.
+        """Store fixes, upsert tracks and activity, append events in one transaction.
 
         Parameters
         ----------
@@ -241,6 +265,10 @@ class Store:
             Payloads without ``seq``; each gets the next sequence number.
         replace_tracks : bool
             Delete every stored track first.
+        activity : iterable of dict
+            Activity event bodies (``key, kind, t_start_s, t_end_s, track_ids, open``
+            and the rest): inserted, or replacing the row with the same ``key`` (which
+            keeps its ``id``); each body gets its row ``id`` filled in.
 
         Returns
         -------
@@ -276,6 +304,36 @@ class Store:
                     for r in tracks
                 ],
             )
+            for body in activity:
+                row = c.execute("SELECT id FROM activity WHERE key = ?", (body["key"],)).fetchone()
+                if row is None:
+                    cur = c.execute(
+                        "INSERT INTO activity (key, kind, t_start, t_end, track_ids, open, body)"
+                        " VALUES (?,?,?,?,?,?,'')",
+                        (
+                            body["key"],
+                            body["kind"],
+                            body["t_start_s"],
+                            body["t_end_s"],
+                            _dumps(body["track_ids"]),
+                            int(body["open"]),
+                        ),
+                    )
+                    body["id"] = int(cur.lastrowid or 0)
+                else:
+                    body["id"] = int(row[0])
+                c.execute(
+                    "UPDATE activity SET t_start = ?, t_end = ?, track_ids = ?, open = ?,"
+                    " body = ? WHERE id = ?",
+                    (
+                        body["t_start_s"],
+                        body["t_end_s"],
+                        _dumps(body["track_ids"]),
+                        int(body["open"]),
+                        _dumps(body),
+                        body["id"],
+                    ),
+                )
             seqs = []
             for kind, payload in events:
                 cur = c.execute(
@@ -299,7 +357,7 @@ class Store:
         """Rows per table."""
         return {
             t: int(self._rows(f"SELECT COUNT(*) FROM {t}")[0][0])  # noqa: S608  (fixed names)
-            for t in ("batches", "detections", "fixes", "tracks", "events")
+            for t in ("batches", "detections", "fixes", "tracks", "events", "activity")
         }
 
     def last_seq(self) -> int:
@@ -378,4 +436,42 @@ class Store:
             params += list(bbox)
         where = " WHERE " + " AND ".join(clauses) if clauses else ""
         rows = self._rows(f"SELECT body FROM tracks{where} ORDER BY id", params)  # noqa: S608
+        return [json.loads(r[0]) for r in rows]
+
+    def activity(
+        self,
+        *,
+        t_from: float | None = None,
+        t_to: float | None = None,
+        kinds: Sequence[str] | None = None,
+        open_only: bool = False,
+        limit: int = 10_000,
+    ) -> list[dict[str, Any]]:
+        """Activity event bodies overlapping ``[t_from, t_to]``, of the kinds, by start time."""
+        clauses, params = [], []
+        if t_from is not None:
+            clauses.append("t_end >= ?")
+            params.append(t_from)
+        if t_to is not None:
+            clauses.append("t_start <= ?")
+            params.append(t_to)
+        if kinds:
+            clauses.append(f"kind IN ({','.join('?' * len(kinds))})")
+            params += list(kinds)
+        if open_only:
+            clauses.append("open = 1")
+        where = " WHERE " + " AND ".join(clauses) if clauses else ""
+        rows = self._rows(
+            f"SELECT body FROM activity{where} ORDER BY t_start, id LIMIT ?",  # noqa: S608
+            [*params, limit],
+        )
+        return [json.loads(r[0]) for r in rows]
+
+    def latest_activity(self, kind: str) -> list[dict[str, Any]]:
+        """The newest event body of ``kind`` per first track id."""
+        rows = self._rows(
+            "SELECT body FROM activity WHERE id IN (SELECT MAX(id) FROM activity"
+            " WHERE kind = ? GROUP BY json_extract(track_ids, '$[0]'))",
+            (kind,),
+        )
         return [json.loads(r[0]) for r in rows]

@@ -18,7 +18,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
 
@@ -26,6 +26,7 @@ __all__ = [
     "AnyMessage",
     "ClientMessage",
     "ErrorMessage",
+    "EventBody",
     "EventMessage",
     "FixBody",
     "FixMessage",
@@ -144,14 +145,42 @@ class SensorStatusMessage(_Model):
     n_detections: int
 
 
+class EventBody(_Model):
+    """A detected event, as stored in the ``activity`` table and listed by ``/api/events``.
+
+    ``kind``: ``loitering``, ``rendezvous``, ``convoy`` (episodes that last), ``zone-enter``,
+    ``zone-leave`` (instants), ``handoff`` (a live track's predicted exit from its current
+    sensor and the next sensor: ``t_end_s`` is the predicted exit time), ``track_confirmed``,
+    ``track_ended``. An episode is streamed when it starts (``state: start``) and when it
+    ends (``state: end``, final ``t_end_s``); the stored row follows it in between.
+    """
+
+    id: int | None = Field(default=None, description="row id in the activity table")
+    key: str = Field(description="stable identity: kind, targets and start")
+    identity: str = Field(description="kind and targets (episodes of one identity follow on)")
+    kind: str
+    state: Literal["start", "update", "end"]
+    t_start_s: float
+    t_end_s: float
+    track_ids: list[int] = Field(description="targets involved (a convoy: leader first)")
+    sensors: list[str] = Field(description="sensors that saw them (hand-off: current, next)")
+    p_enu: tuple[float, float, float] = Field(description="where, site frame (m)")
+    lat_deg: float
+    lon_deg: float
+    h_m: float = Field(description="above the WGS84 ellipsoid")
+    details: dict[str, Any] = Field(description="kind-specific figures")
+    open: bool = Field(description="an episode still going on")
+
+
 class EventMessage(_Model):
-    """A log line; ``kind``: ``ingest``, ``track_confirmed`` or ``track_ended``."""
+    """A log line; ``kind``: ``ingest``, or a detected event's kind (then ``event``)."""
 
     type: Literal["event"] = "event"
     seq: int
     kind: str
     t_s: float | None
     text: str
+    event: EventBody | None = Field(default=None, description="the detected event, if any")
 
 
 class HelloMessage(_Model):

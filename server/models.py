@@ -202,3 +202,6 @@ class HealthOut(_Response):
     schema_version: int
     last_seq: int
     counts: dict[str, int] | None = None
+    viser_url: str | None = Field(
+        default=None, description="the 3D scene (viser), or null when it is not served"
+    )

@@ -5,29 +5,49 @@ so detection ids, the tracker's input order and the stream's sequence numbers al
 arrival order. The tracker's input is always the fix *as stored* (rebuilt from its JSON),
 so replaying the stored fixes at start-up rebuilds exactly the tracker state the live
 run had: tracks after a restart are those the uninterrupted run would have made.
+
+Reorder buffer
+    Fixes wait in a heap until the newest accepted fix is ``reorder_lag_s`` ahead of them
+    (scenario time), then go to the tracker in ``(t_s, sensor, detection_id)`` order, so
+    batches from several cameras that arrive slightly out of order are tracked in time
+    order, and in the same order whatever the arrival order. A fix that sorts before the
+    last one handed to the tracker is stored with ``tracked: false``. Every fix handed
+    over is then in that order overall, so the start-up replay sorts the stored
+    ``tracked`` fixes, hands over those at most ``reorder_lag_s`` behind the newest and
+    puts the rest back in the buffer: the same state as before the restart.
+
+Live events
+    After each batch :class:`~demtrack.server.live_events.LiveEvents` may run the activity
+    detectors and hand-off prediction (every ``every_s`` of scenario time); its events are
+    stored in the ``activity`` table and streamed as ``event`` messages.
 """
 
 from __future__ import annotations
 
+import heapq
 import io
 import json
 import logging
+import math
 import threading
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
+from demtrack.core.activity import ConvoyParams, LoiterParams, RendezvousParams
 from demtrack.core.detections import read_detections_jsonl
 from demtrack.core.errors import DemtrackError
 from demtrack.core.fix_builder import build_fixes, sensor_sizes
 from demtrack.core.site import Site
 from demtrack.core.tracking import build_tracker
 from demtrack.core.tracking.types import Detection, Fix, Track
+from demtrack.core.zone_io import read_zones_geojson
 
 from .db import Store
+from .live_events import LiveEventParams, LiveEvents
 
-__all__ = ["Pipeline", "fix_from_body"]
+__all__ = ["Pipeline", "fix_from_body", "pipeline_options"]
 
 log = logging.getLogger("demtrack.server")
 
@@ -45,6 +65,40 @@ def _hit(p: np.ndarray, sigma: float, geo: tuple[float, float, float]) -> dict[s
         "lon_deg": geo[1],
         "h_m": geo[2],
         "sigma_m": float(sigma),
+    }
+
+
+def pipeline_options(settings: Any) -> dict[str, Any]:
+    """Keyword arguments of :class:`Pipeline` from the server settings.
+
+    Zones come from ``settings.zones_path`` or, when unset, ``<site>/zones.geojson`` if
+    that file exists (read in the site's frame).
+    """
+    return {
+        "reorder_lag_s": settings.reorder_lag_s,
+        "events": (
+            LiveEventParams(
+                every_s=settings.events_every_s,
+                window_s=settings.events_window_s,
+                sample_s=settings.events_sample_s,
+                loiter=LoiterParams(settings.loiter_radius_m, settings.loiter_min_s),
+                rendezvous=RendezvousParams(
+                    settings.rendezvous_distance_m,
+                    settings.rendezvous_stop_mps,
+                    settings.rendezvous_min_s,
+                ),
+                convoy=ConvoyParams(
+                    path_tolerance_m=settings.convoy_path_tolerance_m,
+                    max_lag_s=settings.convoy_max_lag_s,
+                    min_distance_m=settings.convoy_min_distance_m,
+                ),
+                handoff_horizon_s=settings.handoff_horizon_s,
+                handoff_dt_s=settings.handoff_dt_s,
+            )
+            if settings.events
+            else None
+        ),
+        "zones_path": settings.zones_path or settings.site / "zones.geojson",
     }
 
 
@@ -77,34 +131,68 @@ class Pipeline:
         Tracking method (a key of :data:`demtrack.core.tracking.METHODS`).
     publish : callable
         Receives each batch's stream messages, in sequence order.
+    reorder_lag_s : float
+        How far behind the newest fix a fix waits before it is tracked (s).
+    events : LiveEventParams or None
+        Live activity detection and hand-off prediction; None turns them off.
+    zones_path : path, optional
+        GeoJSON zones for enter/leave events (ignored when the file does not exist).
     """
 
-    def __init__(self, site: Site, store: Store, method: str, publish: Publisher) -> None:
+    def __init__(
+        self,
+        site: Site,
+        store: Store,
+        method: str,
+        publish: Publisher,
+        *,
+        reorder_lag_s: float = 0.5,
+        events: LiveEventParams | None = None,
+        zones_path: Any = None,
+    ) -> None:
         self.site = site
         self.store = store
         self.method = method
         self.publish = publish
         self.sizes = sensor_sizes(site)
         self.tracker = build_tracker(method, roads=site.roads)
+        self.reorder_lag_s = float(reorder_lag_s)
+        if events is not None and zones_path is not None:
+            from pathlib import Path
+
+            if Path(zones_path).is_file():
+                zones = tuple(read_zones_geojson(zones_path, site.frame))
+                events = LiveEventParams(**{**events.__dict__, "zones": zones})
+        self.event_params = events
+        self.live_events: LiveEvents | None = None
         self._lock = threading.Lock()
         self._last_t: dict[str, float] = {}
         self._n_det: dict[str, int] = {}
         self._seen: dict[int, tuple[int, bytes, bool]] = {}
+        self._live_ids: set[int] = set()
+        self._points: dict[int, tuple[np.ndarray, list[dict[str, Any]]]] = {}
+        self._heap: list[tuple[float, str, int, dict[str, Any]]] = []
+        self._newest_t = -math.inf
+        self._released_t = -math.inf
+        self._released_key: tuple[float, str, int] = (-math.inf, "", -1)
         self.n_late = 0
 
     # ---------------------------------------------------------------- start-up
     def start(self) -> dict[str, int]:
         """Rebuild the tracker from the stored fixes and finish interrupted work.
 
-        Detections stored but not yet processed (a crash between commit and tracking) are
-        processed now, and the tracks table is rewritten.
+        The stored ``tracked`` fixes are sorted by ``(t_s, sensor, detection_id)``; those at most
+        ``reorder_lag_s`` behind the newest go to the tracker, the rest back into the
+        reorder buffer. Detections stored but not yet processed (a crash between commit
+        and tracking) are processed now, and the tracks table is rewritten.
 
         Returns counts: ``replayed`` fixes and ``processed`` detections.
         """
         with self._lock:
             self._last_t = self.store.last_times()
             self._n_det = self.store.sensor_counts()
-            replayed, after = 0, 0
+            queued: list[tuple[float, str, int, dict[str, Any]]] = []
+            after = 0
             while True:
                 bodies = self.store.fixes(after, 5000)
                 if not bodies:
@@ -112,12 +200,21 @@ class Pipeline:
                 for body in bodies:
                     after = body["detection_id"]
                     if body.get("hits") is not None and body.get("tracked"):
-                        self.tracker.update(fix_from_body(body), index=body["detection_id"])
-                        replayed += 1
+                        queued.append((body["t_s"], body["sensor"], body["detection_id"], body))
+            queued.sort(key=lambda q: q[:3])
+            self._heap = queued  # a sorted list is a heap
+            if queued:
+                self._newest_t = max(q[0] for q in queued)
+            replayed = self._release()
             # Every track as the replay left it (the table may hold tracks of fixes whose
             # batch was cut short); its messages were already sent before the restart.
-            rows, _ = self._track_changes(force=True)
+            rows, _ = self._track_changes(self.tracker.tracks(), force=True)
             self.store.write_derived([], rows, [], replace_tracks=True)
+            if self.event_params is not None:
+                known = self.store.activity(open_only=True) + self.store.latest_activity("handoff")
+                self.live_events = LiveEvents(self.site, self.event_params, known)
+                if math.isfinite(self._released_t):
+                    self.live_events.last_eval_t = self._released_t
             processed = 0
             while True:
                 pending = self.store.detections(0, 5000, unprocessed=True)
@@ -185,6 +282,36 @@ class Pipeline:
                 log.exception("processing batch %s failed after commit", stored.batch_id)
             return ack
 
+    # ------------------------------------------------------------ reorder buffer
+    def _admit(self, body: dict[str, Any]) -> bool:
+        """Queue a fix for the tracker; False when it sorts before what was tracked."""
+        key = (body["t_s"], body["sensor"], body["detection_id"])
+        if key < self._released_key:
+            return False
+        heapq.heappush(self._heap, (*key, body))
+        self._newest_t = max(self._newest_t, body["t_s"])
+        return True
+
+    def _release(self) -> int:
+        """Hand the fixes at most ``reorder_lag_s`` behind the newest to the tracker."""
+        horizon = self._newest_t - self.reorder_lag_s
+        n = 0
+        while self._heap and self._heap[0][0] <= horizon:
+            t, sensor, det_id, body = heapq.heappop(self._heap)
+            self._released_key = (t, sensor, det_id)
+            try:
+                self.tracker.update(fix_from_body(body), index=det_id)
+            except DemtrackError:  # cannot happen in time order; never stop the stream
+                log.exception("tracker refused fix %s", det_id)
+            self._released_t = max(self._released_t, t)
+            n += 1
+        return n
+
+    @property
+    def n_buffered(self) -> int:
+        """Fixes waiting in the reorder buffer."""
+        return len(self._heap)
+
     # -------------------------------------------------------------- processing
     def _process(
         self,
@@ -194,25 +321,38 @@ class Pipeline:
     ) -> None:
         dets = [d for _, d in pending]
         fixes, _ = build_fixes(self.site, dets)
-        by_index = {f.detection_index: f for f in fixes}
+        bodies = self._fix_bodies(pending, fixes)
         rows: list[tuple[int, float, str, str, str, dict[str, Any]]] = []
         events: list[tuple[str, dict[str, Any]]] = []
-        for k, (det_id, d) in enumerate(pending):
-            fix = by_index.get(k)
-            if fix is None:
-                body: dict[str, Any] = {"detection_id": det_id, "hits": None, "tracked": False}
+        for (det_id, d), body in zip(pending, bodies, strict=True):
+            if body is None:
+                body = {"detection_id": det_id, "hits": None, "tracked": False}
                 rows.append((det_id, d.t_s, d.sensor, d.cls, "no_fix", body))
                 continue
-            body = self._fix_body(det_id, d, fix)
-            try:
-                self.tracker.update(fix_from_body(body), index=det_id)
-            except DemtrackError:  # older than what the tracker already processed
+            if not self._admit(body):
                 body["tracked"] = False
                 self.n_late += 1
             rows.append((det_id, d.t_s, d.sensor, d.cls, "fix", body))
             events.append(("fix", {"type": "fix", "fix": body}))
-        track_rows, track_events = self._track_changes()
+        self._release()
+        live_now = self.tracker.tracks(include_ended=False)
+        ended_ids = self._live_ids - {t.id for t in live_now}
+        changed = live_now
+        if ended_ids:  # rare: read the ended tracks' final form once
+            changed = [t for t in self.tracker.tracks() if t.id in ended_ids] + live_now
+        track_rows, track_events = self._track_changes(changed)
         events += track_events
+        activity = [p["event"] for kind, p in track_events if kind == "event"]
+        if self.live_events is not None and math.isfinite(self._released_t):
+            if self.live_events.due(self._released_t):
+                window = self._released_t - self.live_events.params.window_s
+                found = self.live_events.evaluate(
+                    self._window_tracks(window), self._live_ids, self._released_t
+                )
+                for body in found:
+                    activity.append(body)
+                    if body["state"] != "update":
+                        events.append(("event", _event_message(body)))
         sensors = sorted({d.sensor for d in dets})
         for s in sensors:
             events.append(
@@ -233,60 +373,101 @@ class Pipeline:
             )
             t = max((d.t_s for d in dets), default=None)
             events.append(("event", {"type": "event", "kind": "ingest", "t_s": t, "text": text}))
-        seqs = self.store.write_derived(rows, track_rows, events)
+        seqs = self.store.write_derived(rows, track_rows, events, activity=activity)
         self.publish([{**p, "seq": s} for (_, p), s in zip(events, seqs, strict=True)])
 
-    def _fix_body(self, det_id: int, d: Detection, fix: Fix) -> dict[str, Any]:
-        pts = fix.hits_enu
-        if fix.road_hit_enu is not None:
-            pts = np.vstack([pts, fix.road_hit_enu[None, :]])
-        lat, lon, h = (np.atleast_1d(a) for a in self.site.frame.to_geodetic(*pts.T))
-        geo = [(float(a), float(b), float(c)) for a, b, c in zip(lat, lon, h, strict=True)]
-        hits = [
-            _hit(p, s, geo[k])
-            for k, (p, s) in enumerate(zip(fix.hits_enu, fix.hit_sigma_m, strict=True))
-        ]
-        road = None
-        if fix.road_hit_enu is not None:
-            sigma = float(np.min(fix.hit_sigma_m)) if len(fix.hit_sigma_m) else 1.0
-            road = _hit(fix.road_hit_enu, sigma, geo[-1])
-        u0, _, u1, v1 = d.bbox
-        return {
-            "detection_id": det_id,
-            "t_s": d.t_s,
-            "sensor": d.sensor,
-            "cls": d.cls,
-            "score": d.score,
-            "bbox": list(d.bbox),
-            "foot_pixel": [0.5 * (u0 + u1), v1],
-            "origin_enu": [float(x) for x in fix.origin_enu],
-            "direction_enu": [float(x) for x in fix.direction_enu],
-            "hits": hits,
-            "road_hit": road,
-            "tracked": True,
-        }
+    def _window_tracks(self, t_from: float) -> list[Track]:
+        """Tracks with a point at or after ``t_from`` (live ones and recently ended)."""
+        return [t for t in self.tracker.tracks() if t.points and t.points[-1].t_s >= t_from]
+
+    def _fix_bodies(
+        self, pending: list[tuple[int, Detection]], fixes: list[Fix]
+    ) -> list[dict[str, Any] | None]:
+        """The stored body of each detection's fix (None: no fix); one geodetic call."""
+        by_index = {f.detection_index: f for f in fixes}
+        chunks = []
+        for f in fixes:
+            chunks.append(f.hits_enu)
+            if f.road_hit_enu is not None:
+                chunks.append(f.road_hit_enu[None, :])
+        if chunks:
+            pts = np.vstack(chunks)
+            lat, lon, h = (np.atleast_1d(a) for a in self.site.frame.to_geodetic(*pts.T))
+            geo = np.column_stack([lat, lon, h]).tolist()
+        k = 0
+        out: list[dict[str, Any] | None] = []
+        for i, (det_id, d) in enumerate(pending):
+            fix = by_index.get(i)
+            if fix is None:
+                out.append(None)
+                continue
+            hits = []
+            for p, sigma in zip(fix.hits_enu.tolist(), fix.hit_sigma_m.tolist(), strict=True):
+                hits.append(_hit(p, sigma, geo[k]))
+                k += 1
+            road = None
+            if fix.road_hit_enu is not None:
+                sigma = float(np.min(fix.hit_sigma_m)) if len(fix.hit_sigma_m) else 1.0
+                road = _hit(fix.road_hit_enu.tolist(), sigma, geo[k])
+                k += 1
+            u0, _, u1, v1 = d.bbox
+            out.append(
+                {
+                    "detection_id": det_id,
+                    "t_s": d.t_s,
+                    "sensor": d.sensor,
+                    "cls": d.cls,
+                    "score": d.score,
+                    "bbox": list(d.bbox),
+                    "foot_pixel": [0.5 * (u0 + u1), v1],
+                    "origin_enu": fix.origin_enu.tolist(),
+                    "direction_enu": fix.direction_enu.tolist(),
+                    "hits": hits,
+                    "road_hit": road,
+                    "tracked": True,
+                }
+            )
+        return out
 
     # ------------------------------------------------------------------ tracks
+    def _point_dicts(self, track: Track) -> list[dict[str, Any]]:
+        """JSON points of a track; geodetic conversion only for points that changed."""
+        p = track.p_enu
+        cached = self._points.get(track.id)
+        same = 0
+        if cached is not None:
+            old_p, old_pts = cached
+            m = min(len(old_p), len(p))
+            diff = np.flatnonzero(np.any(old_p[:m] != p[:m], axis=1))
+            same = int(diff[0]) if len(diff) else m
+            same = min(same, len(old_pts))
+            pts = old_pts[:same]
+        else:
+            pts = []
+        new = track.points[same:]
+        if new:
+            q = p[same:]
+            lat, lon, h = (np.atleast_1d(a) for a in self.site.frame.to_geodetic(*q.T))
+            for k, tp in enumerate(new):
+                pts.append(
+                    {
+                        "t_s": tp.t_s,
+                        "e_m": float(q[k, 0]),
+                        "n_m": float(q[k, 1]),
+                        "u_m": float(q[k, 2]),
+                        "lat_deg": float(lat[k]),
+                        "lon_deg": float(lon[k]),
+                        "h_m": float(h[k]),
+                        "sensors": list(tp.sensors),
+                        "detection_ids": list(tp.fix_indices),
+                    }
+                )
+        self._points[track.id] = (p, pts)
+        return pts
+
     def track_body(self, track: Track, live: bool, first_index: int = 0) -> dict[str, Any]:
         """JSON body of a track, points from ``first_index`` on."""
-        pts = track.points[first_index:]
-        if pts:
-            p = np.stack([q.p_enu for q in pts])
-            lat, lon, h = (np.atleast_1d(a) for a in self.site.frame.to_geodetic(*p.T))
-        points = [
-            {
-                "t_s": q.t_s,
-                "e_m": float(q.p_enu[0]),
-                "n_m": float(q.p_enu[1]),
-                "u_m": float(q.p_enu[2]),
-                "lat_deg": float(lat[k]),
-                "lon_deg": float(lon[k]),
-                "h_m": float(h[k]),
-                "sensors": list(q.sensors),
-                "detection_ids": list(q.fix_indices),
-            }
-            for k, q in enumerate(pts)
-        ]
+        points = self._point_dicts(track)[first_index:]
         return {
             "id": track.id,
             "cls": track.cls,
@@ -299,13 +480,14 @@ class Pipeline:
         }
 
     def _track_changes(
-        self, force: bool = False
+        self, tracks: Sequence[Track], force: bool = False
     ) -> tuple[list[dict[str, Any]], list[tuple[str, dict[str, Any]]]]:
-        """Tracks that changed since the last call: their table rows and stream messages."""
+        """Of ``tracks``, those that changed since the last call: table rows and messages."""
         live_ids = {t.id for t in self.tracker.tracks(include_ended=False)}
+        self._live_ids = live_ids
         lag = int(getattr(self.tracker.config, "smoothing_lag", 0))
         rows, events = [], []
-        for track in self.tracker.tracks():
+        for track in tracks:
             if not track.points:
                 continue
             live = track.id in live_ids
@@ -331,23 +513,71 @@ class Pipeline:
                     "body": full,
                 }
             )
+            if not live:
+                self._points.pop(track.id, None)  # ended: no more changes expected
             if force:
                 continue
             first = 0 if prev is None else max(0, min(prev[0], len(track.points)) - lag - 1)
             tail = dict(full, first_index=first, points=full["points"][first:])
             events.append(("track_update", {"type": "track_update", "track": tail}))
-            t_last = track.points[-1].t_s
             if prev is None:
-                text = f"track {track.id} ({track.cls}) confirmed"
-                events.append(
-                    (
-                        "event",
-                        {"type": "event", "kind": "track_confirmed", "t_s": t_last, "text": text},
-                    )
-                )
+                events.append(("event", self._track_event("track_confirmed", track)))
             elif prev[2] and not live:
-                text = f"track {track.id} ({track.cls}) ended"
-                events.append(
-                    ("event", {"type": "event", "kind": "track_ended", "t_s": t_last, "text": text})
-                )
+                events.append(("event", self._track_event("track_ended", track)))
         return rows, events
+
+    def _track_event(self, kind: str, track: Track) -> dict[str, Any]:
+        last = track.points[-1]
+        t, where = last.t_s, last.p_enu
+        lat, lon, h = (float(v) for v in self.site.frame.to_geodetic(*where))
+        body = {
+            "key": f"{kind}:{track.id}",
+            "identity": f"{kind}:{track.id}",
+            "kind": kind,
+            "state": "start",
+            "t_start_s": t,
+            "t_end_s": t,
+            "track_ids": [track.id],
+            "sensors": sorted(track.sensors),
+            "p_enu": [float(v) for v in where],
+            "lat_deg": lat,
+            "lon_deg": lon,
+            "h_m": h,
+            "details": {"cls": track.cls, "n_points": len(track.points)},
+            "open": False,
+        }
+        return _event_message(body)
+
+
+_EVENT_TEXT = {
+    "loitering": "track {ids} loitering",
+    "rendezvous": "tracks {ids} rendezvous",
+    "convoy": "tracks {ids} in convoy",
+    "zone-enter": "track {ids} entered {zone}",
+    "zone-leave": "track {ids} left {zone}",
+    "handoff": "track {ids}: {current} loses it at {exit:.1f} s, next {next}",
+    "track_confirmed": "track {ids} ({cls}) confirmed",
+    "track_ended": "track {ids} ({cls}) ended",
+}
+
+
+def _event_message(body: dict[str, Any]) -> dict[str, Any]:
+    """The ``event`` stream message of an activity body."""
+    d = body.get("details", {})
+    text = _EVENT_TEXT.get(body["kind"], body["kind"]).format(
+        ids=", ".join(str(i) for i in body["track_ids"]),
+        zone=d.get("zone", ""),
+        current=d.get("current"),
+        next=d.get("next_sensor"),
+        exit=d.get("exit_t_s") or 0.0,
+        cls=d.get("cls", ""),
+    )
+    if body["state"] == "end":
+        text += f" (ended, {body['t_end_s'] - body['t_start_s']:.0f} s)"
+    return {
+        "type": "event",
+        "kind": body["kind"],
+        "t_s": body["t_end_s"] if body["state"] == "end" else body["t_start_s"],
+        "text": text,
+        "event": body,
+    }

@@ -8,9 +8,10 @@ arguments, then the environment (``DEMTRACK_SITE``, ``DEMTRACK_TOKEN``, ...), th
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Annotated, Any
 
-from pydantic import Field, SecretStr
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic import Field, SecretStr, field_validator
+from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 __all__ = ["Settings"]
 
@@ -45,6 +46,42 @@ class Settings(BaseSettings):
         A method of :data:`demtrack.core.tracking.METHODS`.
     warm_up : bool
         Compile (or load) the numba kernels at start-up.
+    replay : list of str
+        Sample-site scenarios replayed live into the ingest path (``DEMTRACK_REPLAY=
+        vehicle-run,pedestrians``); empty for none. Needs a generated sample site.
+    replay_speed : float
+        Replay speed, times real time.
+    replay_loop : bool
+        Repeat the scenarios forever (else play them once).
+    scene3d : bool
+        Serve the viser 3D scene on its own port.
+    viser_host : str
+        Address the 3D scene binds (the CLI passes the API's ``--host``).
+    viser_port : int
+        Port of the 3D scene (0 = any free; viser moves off a busy port silently).
+    scene3d_rays : int
+        Viewing rays kept in the 3D scene (the newest).
+    reorder_lag_s : float
+        Fixes wait this long (scenario time, behind the newest fix) in a reorder buffer so
+        slightly out-of-order batches from several cameras are tracked in time order; a
+        fix older than what was already tracked is stored with ``tracked: false``.
+    events : bool
+        Run the activity detectors and hand-off prediction on the live tracks.
+    events_every_s, events_window_s, events_sample_s : float
+        Re-evaluate every this much scenario time, over this sliding window, on track
+        points this far apart.
+    loiter_radius_m, loiter_min_s : float
+        Loitering: inside a disc of this radius for at least this long.
+    rendezvous_distance_m, rendezvous_stop_mps, rendezvous_min_s : float
+        Rendezvous: this close, both slower than this, for at least this long.
+    convoy_path_tolerance_m, convoy_min_distance_m, convoy_max_lag_s : float
+        Convoy: on the leader's path within the tolerance, a steady lag up to the
+        maximum, for at least the distance.
+    zones_path : Path or None
+        GeoJSON zones (lon/lat polygons, ``properties.name``) for enter/leave events;
+        default ``<site>/zones.geojson`` when that file exists.
+    handoff_horizon_s, handoff_dt_s : float
+        Hand-off prediction horizon and time step (0 horizon: no prediction).
     """
 
     model_config = SettingsConfigDict(
@@ -62,6 +99,49 @@ class Settings(BaseSettings):
     max_batch: int = Field(default=10_000, gt=0)
     tracker_method: str = "kalman"
     warm_up: bool = True
+    replay: Annotated[list[str], NoDecode] = Field(default_factory=list)
+    replay_speed: float = Field(default=1.0, gt=0, allow_inf_nan=False)
+    replay_loop: bool = True
+    scene3d: bool = False
+    viser_host: str = "127.0.0.1"
+    viser_port: int = Field(default=8080, ge=0, le=65535)
+    scene3d_rays: int = Field(default=40, ge=1, le=1000)
+    reorder_lag_s: float = Field(default=0.5, ge=0, le=60, allow_inf_nan=False)
+    events: bool = True
+    events_every_s: float = Field(default=1.0, gt=0, le=3600, allow_inf_nan=False)
+    events_window_s: float = Field(default=180.0, gt=0, le=86400, allow_inf_nan=False)
+    events_sample_s: float = Field(default=0.5, gt=0, le=60, allow_inf_nan=False)
+    loiter_radius_m: float = Field(default=10.0, gt=0, allow_inf_nan=False)
+    loiter_min_s: float = Field(default=60.0, gt=0, allow_inf_nan=False)
+    rendezvous_distance_m: float = Field(default=5.0, gt=0, allow_inf_nan=False)
+    rendezvous_stop_mps: float = Field(default=0.5, gt=0, allow_inf_nan=False)
+    rendezvous_min_s: float = Field(default=20.0, gt=0, allow_inf_nan=False)
+    convoy_path_tolerance_m: float = Field(default=5.0, gt=0, allow_inf_nan=False)
+    convoy_min_distance_m: float = Field(default=100.0, gt=0, allow_inf_nan=False)
+    convoy_max_lag_s: float = Field(default=30.0, gt=0, allow_inf_nan=False)
+    zones_path: Path | None = None
+    handoff_horizon_s: float = Field(default=10.0, ge=0, le=120, allow_inf_nan=False)
+    handoff_dt_s: float = Field(default=1.0, gt=0, le=10, allow_inf_nan=False)
+
+    @field_validator("replay", mode="before")
+    @classmethod
+    def _split_replay(cls, value: Any) -> Any:
+        """Accept ``"a,b"`` (the environment's form) as well as a list."""
+        if isinstance(value, str):
+            return [part.strip() for part in value.split(",") if part.strip()]
+        return value
+
+    @field_validator("replay")
+    @classmethod
+    def _known_scenarios(cls, value: list[str]) -> list[str]:
+        from demtrack.samplesite.scenarios import SCENARIOS
+
+        unknown = [name for name in value if name not in SCENARIOS]
+        if unknown:
+            raise ValueError(
+                f"unknown replay scenario {unknown[0]!r}; known: {', '.join(sorted(SCENARIOS))}"
+            )
+        return value
 
     @property
     def resolved_db_path(self) -> Path:

@@ -1,10 +1,19 @@
-"""``demtrack sample-site`` and ``demtrack demo``."""
+"""``demtrack sample-site`` and ``demtrack demo``.
+
+``demtrack demo`` is the live console: it builds the sample site if it is missing, starts
+the server (uvicorn, in this process) with scenarios replaying live into the ingest path
+and the viser 3D scene, and prints the console, API-docs and 3D-view URLs once the first
+page can be served. ``demtrack demo --walkthrough`` prints the older text walk-through
+(one geolocation from each camera) instead.
+"""
 
 from __future__ import annotations
 
 import argparse
 import shutil
+import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -13,8 +22,12 @@ from demtrack.core.site import MANIFEST, Sensor, Site, load_site
 
 from .common import DEFAULT_SITE
 from .geolocate import print_geolocation
+from .serve import add_live_arguments, live_overrides, serve_app
 
-__all__ = ["ensure_sample_site", "register"]
+__all__ = ["DEMO_SCENARIOS", "ensure_sample_site", "register"]
+
+#: What ``demtrack demo`` replays by default: a car on the roads, people on the field.
+DEMO_SCENARIOS = ["vehicle-run", "pedestrians"]
 
 
 def ensure_sample_site(path: Path, *, rebuild: bool = False) -> Path:
@@ -58,7 +71,56 @@ def _showcase_pixel(site: Site, sensor: Sensor, geo: Geolocator) -> tuple[float,
     return (intr.width - 1) / 2, intr.height * 0.8, "(open ground)"
 
 
-def _demo(args: argparse.Namespace) -> int:
+def _fresh_db(path: Path) -> None:
+    """Remove a demo database (and its WAL files); the token file next to it stays."""
+    for suffix in ("", "-wal", "-shm", "-journal"):
+        p = path.with_name(path.name + suffix)
+        if p.is_file():
+            p.unlink()
+
+
+def _live(args: argparse.Namespace) -> int:
+    from demtrack.server.app import create_app
+    from demtrack.server.scene3d import display_host
+
+    t_start = time.monotonic()
+    live = live_overrides(args, DEMO_SCENARIOS)  # checks the options before any work
+    site_dir = ensure_sample_site(args.site)
+    db = args.db if args.db is not None else site_dir / "demo.sqlite3"
+    if not args.keep_db:
+        _fresh_db(db)
+    overrides: dict[str, Any] = {
+        "site": site_dir,
+        "db_path": db,
+        "scene3d": not args.no_3d,
+        **live,
+    }
+    app = create_app(**overrides)
+    settings = app.state.settings
+    print(f"site {settings.site}, database {settings.resolved_db_path} (fresh each run)")
+    print("starting the console (site, tracker, ray-casting kernels, 3D scene) ...", flush=True)
+
+    def ready(port: int) -> None:
+        base = f"http://{display_host(args.host)}:{port}"
+        console = f"{base}/?token={app.state.token}"
+        print(f"\ndemtrack console ready in {time.monotonic() - t_start:.1f} s")
+        print(f"  console   {console}")
+        print(f"  API docs  {base}/docs   (operator token {app.state.token})")
+        print(f"  3D view   {app.state.viser_url or 'off (--no-3d)'}")
+        print(
+            f"  replaying {', '.join(settings.replay)} at {settings.replay_speed:g}x,"
+            " looping; Ctrl-C stops",
+            flush=True,
+        )
+        if args.open:
+            import webbrowser
+
+            webbrowser.open(console)
+
+    return serve_app(app, args.host, args.port, args.log_level, on_ready=ready)
+
+
+def _walkthrough(args: argparse.Namespace) -> int:
     site = load_site(ensure_sample_site(args.site))
     print(
         f"\nsite {site.name!r}: frame anchored at {site.frame.lat_deg:.6f}, "
@@ -81,12 +143,44 @@ def _demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _demo(args: argparse.Namespace) -> int:
+    return _walkthrough(args) if args.walkthrough else _live(args)
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``sample-site`` and ``demo`` commands."""
     p = sub.add_parser("sample-site", help="generate the synthetic Bushy Run sample site")
     p.add_argument("dir", type=Path, nargs="?", default=DEFAULT_SITE, help="output folder")
     p.add_argument("--force", action="store_true", help="rebuild even if the site exists")
     p.set_defaults(func=_sample_site)
-    p = sub.add_parser("demo", help="build the sample site if needed and walk through it")
+    p = sub.add_parser(
+        "demo",
+        help="the live console on the sample site (built if needed), scenarios replaying",
+        description="Build the sample site if it is missing, start the console server with"
+        " scenarios replaying live and the 3D scene, and print their URLs.",
+    )
     p.add_argument("--site", type=Path, default=DEFAULT_SITE, metavar="DIR")
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    p.add_argument("--port", type=int, default=8000, help="port (default 8000; 0 = any free)")
+    add_live_arguments(p, replay_default=DEMO_SCENARIOS)
+    p.add_argument("--no-3d", action="store_true", help="do not serve the viser 3D scene")
+    p.add_argument(
+        "--db",
+        type=Path,
+        default=None,
+        metavar="PATH",
+        help="SQLite file (default: DIR/demo.sqlite3, emptied at each start)",
+    )
+    p.add_argument(
+        "--keep-db", action="store_true", help="continue the database instead of emptying it"
+    )
+    p.add_argument("--open", action="store_true", help="open the console in a web browser")
+    p.add_argument(
+        "--walkthrough",
+        action="store_true",
+        help="print a text walk-through of one geolocation per camera instead",
+    )
+    p.add_argument(
+        "--log-level", default="warning", choices=["critical", "error", "warning", "info", "debug"]
+    )
     p.set_defaults(func=_demo)

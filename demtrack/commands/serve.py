@@ -4,17 +4,136 @@ from __future__ import annotations
 
 import argparse
 import os
+import threading
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from demtrack.samplesite.scenarios import SCENARIOS
+
 from .common import DEFAULT_SITE
 
-__all__ = ["register"]
+__all__ = ["add_live_arguments", "live_overrides", "print_token", "register", "serve_app"]
+
+SCENARIO_NAMES = tuple(sorted(SCENARIOS))
+
+
+def serve_app(
+    app: Any,
+    host: str,
+    port: int,
+    log_level: str = "info",
+    on_ready: Callable[[int], None] | None = None,
+) -> int:
+    """Run ``app`` on uvicorn until Ctrl-C / SIGTERM; returns the exit status.
+
+    Parameters
+    ----------
+    app : FastAPI
+        From :func:`demtrack.server.app.create_app`.
+    host, port : str, int
+        Address to bind (port 0 = any free one).
+    log_level : str
+        uvicorn's log level.
+    on_ready : callable, optional
+        Called with the bound port once start-up (site, store, tracker, warm-up) is
+        done and the first request can be served.
+
+    Returns
+    -------
+    int
+        0 after a clean shutdown (Ctrl-C included), 1 if start-up failed.
+    """
+    import uvicorn
+
+    settings = app.state.settings
+    config = uvicorn.Config(
+        app,
+        host=host,
+        port=port,
+        log_level=log_level,
+        ws_max_size=max(settings.max_ws_message_bytes * 2, 1 << 20),
+        timeout_graceful_shutdown=5,
+    )
+    server = uvicorn.Server(config)
+    done = threading.Event()
+
+    def watch() -> None:
+        while not done.wait(0.05):
+            if server.started:
+                if on_ready is not None:
+                    on_ready(int(server.servers[0].sockets[0].getsockname()[1]))
+                return
+
+    threading.Thread(target=watch, name="demtrack-ready", daemon=True).start()
+    try:
+        server.run()
+    except KeyboardInterrupt:  # uvicorn re-raises Ctrl-C after its graceful shutdown
+        if not server.started:
+            raise
+    finally:
+        done.set()
+    return 0 if server.started else 1
+
+
+def print_token(app: Any) -> None:
+    """Say where the operator token comes from (printed in full only when new)."""
+    if app.state.token_generated:
+        print(f"operator token (new; saved in {app.state.token_file}): {app.state.token}")
+    elif app.state.token_file is not None:
+        print(f"operator token: in {app.state.token_file}")
+    else:
+        print("operator token: as configured (DEMTRACK_TOKEN)")
+
+
+def add_live_arguments(p: argparse.ArgumentParser, *, replay_default: list[str]) -> None:
+    """Options shared by ``serve`` and ``demo``: scenario replay and the 3D scene."""
+    shown = ",".join(replay_default) or "none"
+    p.add_argument(
+        "--replay",
+        action="append",
+        choices=SCENARIO_NAMES,
+        default=None,
+        metavar="SCENARIO",
+        help=f"replay a sample-site scenario live (repeatable: {', '.join(SCENARIO_NAMES)};"
+        f" default {shown})",
+    )
+    p.add_argument(
+        "--speed",
+        type=float,
+        default=1.0,
+        metavar="X",
+        help="replay speed, times real time (default 1)",
+    )
+    p.add_argument(
+        "--viser-port",
+        type=int,
+        default=8080,
+        metavar="PORT",
+        help="port of the 3D scene (default 8080, 0 = any free; a busy one moves)",
+    )
+
+
+def live_overrides(args: argparse.Namespace, replay_default: list[str]) -> dict[str, Any]:
+    """Settings for the replay and 3D options."""
+    import math
+
+    from demtrack.core.errors import DemtrackError
+
+    if not (math.isfinite(args.speed) and args.speed > 0):
+        raise DemtrackError(f"--speed must be a positive number, got {args.speed}")
+    if not 0 <= args.viser_port <= 65535:
+        raise DemtrackError(f"--viser-port must be within 0..65535, got {args.viser_port}")
+    replay = list(dict.fromkeys(args.replay)) if args.replay else list(replay_default)
+    return {
+        "replay": replay,
+        "replay_speed": args.speed,
+        "viser_host": args.host,
+        "viser_port": args.viser_port,
+    }
 
 
 def _run(args: argparse.Namespace) -> int:
-    import uvicorn
-
     from demtrack.server.app import create_app
 
     overrides: dict[str, Any] = {}
@@ -26,24 +145,20 @@ def _run(args: argparse.Namespace) -> int:
         overrides["db_path"] = args.db
     if args.no_warm_up:
         overrides["warm_up"] = False
+    if args.replay:
+        overrides.update(live_overrides(args, []))
+    if args.scene3d:
+        overrides.update(scene3d=True, viser_host=args.host, viser_port=args.viser_port)
     app = create_app(**overrides)
     settings = app.state.settings
-    if app.state.token_generated:
-        print(f"operator token (new; saved in {app.state.token_file}): {app.state.token}")
-    elif app.state.token_file is not None:
-        print(f"operator token: in {app.state.token_file}")
-    else:
-        print("operator token: as configured (DEMTRACK_TOKEN)")
+    print_token(app)
     print(f"site {settings.site}, database {settings.resolved_db_path}", flush=True)
-    uvicorn.run(
-        app,
-        host=args.host,
-        port=args.port,
-        log_level=args.log_level,
-        ws_max_size=max(settings.max_ws_message_bytes * 2, 1 << 20),
-        timeout_graceful_shutdown=5,
-    )
-    return 0
+
+    def ready(port: int) -> None:
+        if app.state.viser_url is not None:
+            print(f"3D view: {app.state.viser_url}", flush=True)
+
+    return serve_app(app, args.host, args.port, args.log_level, on_ready=ready)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -76,6 +191,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="do not compile the ray-casting kernels at start-up",
     )
+    p.add_argument(
+        "--3d",
+        dest="scene3d",
+        action="store_true",
+        help="also serve the viser 3D scene (on --viser-port)",
+    )
+    add_live_arguments(p, replay_default=[])
     p.add_argument(
         "--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"]
     )

@@ -1,4 +1,4 @@
-"""``demtrack track``: detections file -> geolocated fixes -> tracks (GeoJSON, CSV, GPX)."""
+"""``demtrack track``: detections -> geolocated fixes -> tracks (GeoJSON, CSV, GPX, KML, GPKG)."""
 
 from __future__ import annotations
 
@@ -10,14 +10,20 @@ from demtrack.core.detections import read_detections
 from demtrack.core.errors import InputFileError
 from demtrack.core.fix_builder import build_fixes, sensor_sizes
 from demtrack.core.site import Site, load_site
-from demtrack.core.track_io import write_tracks_csv, write_tracks_geojson, write_tracks_gpx
+from demtrack.core.track_io import (
+    write_tracks_csv,
+    write_tracks_geojson,
+    write_tracks_gpkg,
+    write_tracks_gpx,
+    write_tracks_kml,
+)
 from demtrack.core.tracking import METHODS, Track, run_tracker
 
 from .common import add_site_argument
 
 __all__ = ["DEFAULT_METHOD", "register", "track_detections"]
 
-SUFFIXES = (".geojson", ".json", ".csv", ".gpx")
+SUFFIXES = (".geojson", ".json", ".csv", ".gpx", ".kml", ".gpkg")
 #: Tracking method used by ``track`` and ``activity`` unless ``--method`` says otherwise.
 DEFAULT_METHOD = "multi-hypothesis-road"
 
@@ -60,6 +66,10 @@ def _run(args: argparse.Namespace) -> int:
     elif suffix == ".gpx":
         # GPX needs absolute times: without --epoch, t = 0 is the start of 2000-01-01 UTC.
         write_tracks_gpx(out, tracks, to_geodetic, epoch=epoch or datetime(2000, 1, 1, tzinfo=UTC))
+    elif suffix == ".kml":
+        write_tracks_kml(out, tracks, to_geodetic, epoch=epoch)
+    elif suffix == ".gpkg":
+        write_tracks_gpkg(out, tracks, to_geodetic, epoch=epoch)
     else:
         write_tracks_geojson(out, tracks, to_geodetic, epoch=epoch)
     n_gaps = sum(len(t.gaps) for t in tracks)
@@ -84,7 +94,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="tracking method (default multi-hypothesis-road)",
     )
     p.add_argument(
-        "-o", "--output", required=True, metavar="FILE", help="tracks file: .geojson, .csv or .gpx"
+        "-o",
+        "--output",
+        required=True,
+        metavar="FILE",
+        help="tracks file: .geojson, .csv, .gpx, .kml or .gpkg",
     )
     p.add_argument(
         "--epoch", metavar="ISO8601", help="UTC time of t = 0 s, for absolute times in the output"

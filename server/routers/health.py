@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from fastapi import APIRouter, Depends
+from fastapi import APIRouter, Depends, Request
 
 from ..models import HealthOut
 from ..security import require_reader
@@ -16,12 +16,13 @@ router = APIRouter(prefix="/api", tags=["health"])
 
 
 @router.get("/health", response_model=HealthOut, summary="Liveness")
-def health(state: StateDep) -> dict[str, Any]:
+def health(state: StateDep, request: Request) -> dict[str, Any]:
     """``ok`` once the site is loaded, the store open and the tracker rebuilt."""
     return {
         "status": "ok",
         "schema_version": state.store.schema_version(),
         "last_seq": state.store.last_seq(),
+        "viser_url": getattr(request.app.state, "viser_url", None),
     }
 
 

@@ -121,3 +121,29 @@ def roads(
         )
     ]
     return {"type": "FeatureCollection", "frame": "site ENU (m)", "features": features}
+
+
+@router.get("/elevation", summary="DEM elevation and WGS84 position of a site point")
+def elevation(
+    state: StateDep,
+    e: float = Query(..., description="east (m, site frame)", allow_inf_nan=False),
+    n: float = Query(..., description="north (m, site frame)", allow_inf_nan=False),
+) -> dict[str, Any]:
+    """The DEM surface at ``(e, n)`` and that ground point in WGS84.
+
+    ``u_m``: DEM elevation (site-frame up, m), null off the DEM or in a hole; ``h_m``:
+    height above the WGS84 ellipsoid of that ground point (of ``u = 0`` when null).
+    """
+    if max(abs(e), abs(n)) > 1e7:
+        raise HTTPException(422, f"point ({e}, {n}) is too far from the site frame's anchor")
+    z = float(state.site.dem.sample(np.array([e]), np.array([n]))[0])
+    u = z if np.isfinite(z) else None
+    lat, lon, h = state.site.frame.to_geodetic(e, n, 0.0 if u is None else u)
+    return {
+        "e_m": e,
+        "n_m": n,
+        "u_m": u,
+        "lat_deg": float(lat),
+        "lon_deg": float(lon),
+        "h_m": float(h),
+    }

@@ -182,7 +182,7 @@ def test_build_dem_in_the_points_crs_states_their_vertical_datum(capsys, tmp_pat
 
 
 def test_demo_walks_through_the_site(capsys, sample_site_dir):
-    status, out, _ = run(capsys, "demo", "--site", str(sample_site_dir))
+    status, out, _ = run(capsys, "demo", "--walkthrough", "--site", str(sample_site_dir))
     assert status == 0
     assert out.count("every hit along the ray") == 3 and "lat 40.35" in out
 

@@ -1,0 +1,234 @@
+"""Benchmark: the console server's ingest rate and WebSocket fan-out latency, on loopback.
+
+A real ``demtrack serve`` process (uvicorn) on the sample site, a fresh database:
+
+1. **Ingest**: the sample scenarios' detections (repeated, shifted in time, to the
+   requested count) are posted in batches by one client, each batch after the previous
+   one's acknowledgement. A batch is acknowledged once it is durable (committed, WAL,
+   ``synchronous=FULL``) *and* geolocated, tracked, its events detected and its messages
+   stored and published, so detections / wall time is the sustained rate through the
+   whole path. The durable-storage rate alone (validation and the committed insert, no
+   HTTP) is measured in-process on the same batches for comparison.
+2. **Fan-out**: ``--clients`` WebSocket clients connect; single-detection batches are
+   posted ``--rate`` times a second; for every batch each client notes when its
+   ``ingest`` event message arrives. Latency = arrival - the moment the POST was sent
+   (so it includes processing the one detection: an upper bound of the pure fan-out);
+   the acknowledgement latency is printed beside it.
+
+Targets (issue 3, 2 cores): 5,000 detections/s ingested and tracked; p95 fan-out latency
+under 50 ms. Usage: ``demtrack bench server [--site DIR] [--detections 20000]
+[--batch 500] [--clients 50] [--messages 200]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["main", "scenario_records"]
+
+_TOKEN = "bench-operator-token"
+_TARGET_RATE = 5000.0
+_TARGET_P95_MS = 50.0
+
+
+def scenario_records(site_dir: Path, n: int) -> list[dict[str, Any]]:
+    """``n`` detection records from the sample scenarios, repeated later in time as needed."""
+    from demtrack.core.site import load_site
+    from demtrack.samplesite.scenarios import make_scenario
+
+    site = load_site(site_dir)
+    base: list[dict[str, Any]] = []
+    for name in ("vehicle-run", "pedestrians", "passing-vehicles"):
+        for d in make_scenario(site, name).detections:
+            base.append({"t": d.t_s, "sensor": d.sensor, "bbox": list(d.bbox), "class": d.cls})
+    # The scenarios overlap in time: merge them into one time-ordered stream.
+    base.sort(key=lambda r: (r["t"], r["sensor"]))
+    span = base[-1]["t"] + 10.0
+    out: list[dict[str, Any]] = []
+    k = 0
+    while len(out) < n:
+        out += [dict(r, t=round(r["t"] + k * span, 6)) for r in base[: n - len(out)]]
+        k += 1
+    return out
+
+
+def _start_server(site: Path, db: Path) -> tuple[subprocess.Popen, str]:
+    env = {**os.environ, "DEMTRACK_TOKEN": _TOKEN}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "demtrack.cli", "serve", "--site", str(site), "--db", str(db)]
+        + ["--port", "0", "--log-level", "info"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+    )
+    assert proc.stdout is not None
+    for line in proc.stdout:
+        m = re.search(r"Uvicorn running on (http://[\d.]+:\d+)", line)
+        if m:
+            threading.Thread(target=proc.stdout.read, daemon=True).start()
+            return proc, m.group(1)
+    proc.kill()
+    raise RuntimeError("the server did not start (see demtrack serve's output)")
+
+
+def _ingest(url: str, batches: list[list[dict[str, Any]]]) -> tuple[float, int]:
+    import httpx2 as httpx
+
+    headers = {"Authorization": f"Bearer {_TOKEN}"}
+    accepted = 0
+    with httpx.Client(base_url=url, headers=headers, timeout=600) as c:
+        t0 = time.perf_counter()
+        for b in batches:
+            r = c.post("/api/detections", json={"detections": b})
+            r.raise_for_status()
+            accepted += r.json()["accepted"]
+        return time.perf_counter() - t0, accepted
+
+
+def _durable_only(site_dir: Path, batches: list[list[dict[str, Any]]]) -> float:
+    """Validation and committed inserts alone, in-process (detections/s)."""
+    from demtrack.core.site import load_site
+    from demtrack.server.db import Store
+    from demtrack.server.pipeline import Pipeline
+
+    site = load_site(site_dir)
+    with tempfile.TemporaryDirectory() as tmp:
+        store = Store(Path(tmp) / "d.sqlite3")
+        p = Pipeline(site, store, "kalman", lambda _m: None)
+        n, t0 = 0, time.perf_counter()
+        for b in batches:
+            dets, ack = p._validate(b)
+            store.insert_batch(dets, ack, None)
+            for d in dets:
+                p._last_t[d.sensor] = max(d.t_s, p._last_t.get(d.sensor, d.t_s))
+            n += len(dets)
+        dt = time.perf_counter() - t0
+        store.close()
+    return n / dt
+
+
+async def _fan_out(
+    url: str, n_clients: int, n_messages: int, rate_hz: float, t_start: float, record: dict
+) -> tuple[np.ndarray, np.ndarray]:
+    import httpx2 as httpx
+    import websockets
+
+    ws_url = url.replace("http://", "ws://") + f"/ws?token={_TOKEN}"
+    sent: dict[int, float] = {}
+    arrivals: list[tuple[int, float]] = []
+    ready = asyncio.Event()
+    connected = 0
+
+    async def client() -> None:
+        nonlocal connected
+        async with websockets.connect(ws_url, max_size=None) as ws:
+            await ws.recv()  # hello
+            connected += 1
+            if connected == n_clients:
+                ready.set()
+            while True:
+                text = await ws.recv()
+                now = time.perf_counter()
+                if '"kind":"ingest"' not in text.replace(" ", ""):
+                    continue
+                m = re.search(r"batch (\d+):", json.loads(text)["text"])
+                if m:
+                    arrivals.append((int(m.group(1)), now))
+
+    tasks = [asyncio.create_task(client()) for _ in range(n_clients)]
+    await asyncio.wait_for(ready.wait(), 120)
+    acks = []
+    headers = {"Authorization": f"Bearer {_TOKEN}"}
+    async with httpx.AsyncClient(base_url=url, headers=headers, timeout=60) as c:
+        for k in range(n_messages):
+            rec = dict(record, t=t_start + k / rate_hz)
+            t0 = time.perf_counter()
+            r = await c.post("/api/detections", json={"detections": [rec]})
+            acks.append(time.perf_counter() - t0)
+            sent[r.json()["batch_id"]] = t0
+            await asyncio.sleep(max(0.0, 1.0 / rate_hz - (time.perf_counter() - t0)))
+    deadline = time.perf_counter() + 10
+    while time.perf_counter() < deadline:
+        if sum(1 for b, _ in arrivals if b in sent) >= n_clients * n_messages:
+            break
+        await asyncio.sleep(0.05)
+    for t in tasks:
+        t.cancel()
+    for t in tasks:
+        with contextlib.suppress(BaseException):
+            await t
+    lat = np.array([t - sent[b] for b, t in arrivals if b in sent])
+    return lat, np.array(acks)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the benchmark and print the figures; returns the exit status."""
+    p = argparse.ArgumentParser(prog="demtrack bench server", description=__doc__.split("\n")[0])
+    p.add_argument("--site", type=Path, help="sample site folder (default: build one, ~40 s)")
+    p.add_argument("--detections", type=int, default=20_000, help="detections to ingest")
+    p.add_argument("--batch", type=int, default=500, help="detections per POST")
+    p.add_argument("--clients", type=int, default=50, help="WebSocket clients")
+    p.add_argument("--messages", type=int, default=200, help="batches timed for fan-out")
+    p.add_argument("--rate", type=float, default=20.0, help="fan-out batches per second")
+    args = p.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        site = args.site
+        if site is None:
+            from demtrack.samplesite.build import build_sample_site
+
+            print("building the sample site ...", flush=True)
+            site = build_sample_site(Path(tmp) / "site")
+        recs = scenario_records(site, args.detections)
+        batches = [recs[i : i + args.batch] for i in range(0, len(recs), args.batch)]
+        durable = _durable_only(site, batches)
+        proc, url = _start_server(site, Path(tmp) / "bench.sqlite3")
+        try:
+            wall, accepted = _ingest(url, batches)
+            rate = accepted / wall
+            last = recs[-1]
+            record = {k: last[k] for k in ("sensor", "bbox", "class")}
+            lat, acks = asyncio.run(
+                _fan_out(url, args.clients, args.messages, args.rate, last["t"] + 60.0, record)
+            )
+        finally:
+            proc.kill()
+            proc.wait(10)
+    cpus = os.cpu_count()
+    print(f"demtrack bench server: {len(recs)} detections in batches of {args.batch}, {cpus} CPUs")
+    print(
+        f"  ingest, durable + geolocated + tracked + events (HTTP): {rate:8.0f} det/s"
+        f" ({accepted} in {wall:.1f} s; target {_TARGET_RATE:.0f}: {rate / _TARGET_RATE:.2f} x)"
+    )
+    print(f"  durable storage only (validate + committed insert):  {durable:8.0f} det/s")
+    if len(lat):
+        med, p95 = (1000 * float(np.percentile(lat, q)) for q in (50, 95))
+        amed, ap95 = (1000 * float(np.percentile(acks, q)) for q in (50, 95))
+        got = len(lat) / max(args.clients * args.messages, 1)
+        print(
+            f"  fan-out to {args.clients} WebSocket clients, POST -> message: median"
+            f" {med:.1f} ms, p95 {p95:.1f} ms (target p95 < {_TARGET_P95_MS:.0f} ms;"
+            f" {100 * got:.1f} % of messages seen)"
+        )
+        print(f"  POST -> acknowledgement (1 detection): median {amed:.1f} ms, p95 {ap95:.1f} ms")
+    else:
+        print("  fan-out: no message arrived")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

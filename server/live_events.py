@@ -1,0 +1,315 @@
+"""Live activity events: the detectors and hand-off prediction run on the tracker's tracks.
+
+:class:`LiveEvents` is called by the pipeline after each batch with the tracks as they
+stand and the scenario time the tracker has reached. Every ``every_s`` of scenario time it
+runs :mod:`demtrack.core.activity` (loitering, rendezvous, convoy, zone enter/leave) on
+the last ``window_s`` of every track, thinned to points ``sample_s`` apart, and
+:func:`demtrack.core.handoff.predict_handoff` on each live track; the cost per evaluation
+is bounded by the window, not by how long the server has run.
+
+Episodes are deduplicated: a loitering, rendezvous or convoy found again (same kind and
+targets, overlapping or touching the known episode in time) extends the known one instead
+of starting another; it is closed when an evaluation no longer finds it or its end lags
+the present by more than ``2 * every_s + 2 * sample_s + 1`` s (the targets moved on), and
+is not announced again while the window still holds it. Zone crossings
+are instantaneous: one per track, zone and direction within ``2 * every_s``. A hand-off
+prediction is reported when a track's (current sensor, next sensor) pair changes.
+
+Each event is a JSON-ready dict (the body of the ``activity`` table and of the
+``event`` stream message's ``event`` field): ``key`` (stable identity), ``kind``,
+``state`` (``start``, ``update`` or ``end``), ``t_start_s``, ``t_end_s``,
+``track_ids``, ``sensors``, ``p_enu``, ``lat_deg``, ``lon_deg``, ``h_m``, ``details``
+and ``open``. A body once returned is never changed here (an update is a new dict), so
+it can be published while the next evaluation runs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from demtrack.core.activity import (
+    ActivityEvent,
+    ConvoyParams,
+    LoiterParams,
+    RendezvousParams,
+    Zone,
+    detect_convoys,
+    detect_loitering,
+    detect_rendezvous,
+    detect_zone_crossings,
+)
+from demtrack.core.handoff import predict_handoff
+from demtrack.core.site import Site
+from demtrack.core.tracking.types import Track
+
+__all__ = ["INTERVAL_KINDS", "LiveEventParams", "LiveEvents", "Window", "TARGET_HEIGHT_M"]
+
+#: Kinds that last a while (deduplicated as episodes).
+INTERVAL_KINDS = ("loitering", "rendezvous", "convoy")
+#: Standing height of each class for hand-off visibility (m).
+TARGET_HEIGHT_M = {"vehicle": 1.5, "human": 1.7}
+
+
+@dataclass(frozen=True)
+class LiveEventParams:
+    """How often, over what, and with which detector parameters (see the settings)."""
+
+    every_s: float = 1.0
+    window_s: float = 180.0
+    sample_s: float = 0.5
+    loiter: LoiterParams = field(default_factory=LoiterParams)
+    rendezvous: RendezvousParams = field(default_factory=RendezvousParams)
+    convoy: ConvoyParams = field(default_factory=ConvoyParams)
+    zones: tuple[Zone, ...] = ()
+    handoff_horizon_s: float = 10.0
+    handoff_dt_s: float = 1.0
+
+
+@dataclass(frozen=True, eq=False)
+class Window:
+    """A track's points inside the evaluation window, thinned (what the detectors read)."""
+
+    id: int
+    cls: str
+    t_s: np.ndarray
+    p_enu: np.ndarray
+    sensors: tuple[tuple[str, ...], ...]
+
+
+def _thin(track: Track, t_from: float, sample_s: float) -> Window | None:
+    t = track.t_s
+    k0 = int(np.searchsorted(t, t_from))
+    if k0 >= len(t):
+        return None
+    t = t[k0:]
+    grid = np.arange(t[0], t[-1] + sample_s, sample_s)
+    keep = np.unique(np.minimum(np.searchsorted(t, grid), len(t) - 1))
+    keep = np.union1d(keep, [len(t) - 1])
+    pts = [track.points[k0 + k] for k in keep]
+    return Window(
+        track.id,
+        track.cls,
+        t[keep],
+        np.stack([p.p_enu for p in pts]),
+        tuple(p.sensors for p in pts),
+    )
+
+
+def _identity(e: ActivityEvent) -> str:
+    ids = ",".join(str(i) for i in sorted(e.track_ids))
+    zone = e.details.get("zone")
+    return f"{e.kind}:{ids}" + (f":{zone}" if zone is not None else "")
+
+
+class LiveEvents:
+    """Incremental event detection over a sliding window (see the module docstring).
+
+    Parameters
+    ----------
+    site : Site
+        DEM, sensors and roads (for hand-off prediction).
+    params : LiveEventParams
+    known : sequence of dict
+        Stored bodies still open, and each track's newest hand-off (after a restart).
+    """
+
+    def __init__(self, site: Site, params: LiveEventParams, known: Sequence[dict] = ()) -> None:
+        self.site = site
+        self.params = params
+        self.last_eval_t: float | None = None
+        self._open: dict[str, dict[str, Any]] = {}
+        self._crossings: dict[str, float] = {}
+        self._closed: dict[str, float] = {}
+        self._handoff: dict[int, tuple[str | None, str | None]] = {}
+        for body in known:
+            if body["kind"] == "handoff":
+                d = body["details"]
+                self._handoff[body["track_ids"][0]] = (d.get("current"), d.get("next_sensor"))
+            elif body.get("open"):
+                self._open[body["identity"]] = body
+
+    # ------------------------------------------------------------------ helpers
+    def _body(self, e: ActivityEvent, windows: Mapping[int, Window], identity: str) -> dict:
+        sensors = sorted(
+            {
+                s
+                for tid in e.track_ids
+                if tid in windows
+                for k, t in enumerate(windows[tid].t_s)
+                if e.t_start_s <= t <= e.t_end_s
+                for s in windows[tid].sensors[k]
+            }
+        )
+        return {
+            "key": f"{identity}@{e.t_start_s:.3f}",
+            "identity": identity,
+            "kind": e.kind,
+            "state": "start",
+            "t_start_s": float(e.t_start_s),
+            "t_end_s": float(e.t_end_s),
+            "track_ids": [int(i) for i in e.track_ids],
+            "sensors": sensors,
+            "p_enu": [float(v) for v in e.p_enu],
+            "details": _jsonable(e.details),
+            "open": e.kind in INTERVAL_KINDS,
+        }
+
+    def _geo(self, body: dict[str, Any]) -> dict[str, Any]:
+        lat, lon, h = (float(v) for v in self.site.frame.to_geodetic(*body["p_enu"]))
+        body.update(lat_deg=lat, lon_deg=lon, h_m=h)
+        return body
+
+    def due(self, t_now: float) -> bool:
+        """Whether an evaluation is due at scenario time ``t_now`` (s)."""
+        return self.last_eval_t is None or t_now - self.last_eval_t >= self.params.every_s
+
+    # --------------------------------------------------------------- evaluation
+    def evaluate(
+        self, tracks: Sequence[Track], live_ids: set[int], t_now: float
+    ) -> list[dict[str, Any]]:
+        """Run the detectors at ``t_now``; return new, changed and closed event bodies."""
+        prm = self.params
+        self.last_eval_t = t_now
+        t_from = t_now - prm.window_s
+        windows = {}
+        for tr in tracks:
+            if tr.points and tr.points[-1].t_s >= t_from:
+                w = _thin(tr, t_from, prm.sample_s)
+                if w is not None:
+                    windows[w.id] = w
+        ws = list(windows.values())
+        out: list[dict[str, Any]] = []
+        found = detect_loitering(ws, prm.loiter) + detect_rendezvous(ws, prm.rendezvous)
+        found += detect_convoys([w for w in ws if w.cls == "vehicle"], prm.convoy)
+        # An episode is over once its end lags the present by more than this (s).
+        stale = 2 * prm.every_s + 2 * prm.sample_s + 1.0
+        touch = prm.every_s + prm.sample_s
+        seen: set[str] = set()
+        for e in found:
+            ident = _identity(e)
+            closed = self._closed.get(ident)
+            if closed is not None and e.t_start_s <= closed + touch:
+                continue  # the window still holds an episode already closed
+            old = self._open.get(ident)
+            if old is not None and e.t_start_s <= old["t_end_s"] + touch:
+                seen.add(ident)
+                t0, t1 = min(old["t_start_s"], e.t_start_s), max(old["t_end_s"], e.t_end_s)
+                if (t0, t1) != (old["t_start_s"], old["t_end_s"]):
+                    # a new dict: bodies already returned may still be on their way out
+                    details = _jsonable(e.details)
+                    new = dict(old, t_start_s=t0, t_end_s=t1, state="update", details=details)
+                    self._open[ident] = new
+                    out.append(new)
+                continue
+            if ident in seen:
+                continue
+            if old is not None:  # a new episode of the same targets: close the old one
+                out.append(self._close(ident))
+            if t_now - e.t_end_s > stale:
+                continue  # over before it was seen (e.g. after a restart): not announced
+            body = self._geo(self._body(e, windows, ident))
+            self._open[ident] = body
+            seen.add(ident)
+            out.append(body)
+        for ident in list(self._open):
+            if ident not in seen or t_now - self._open[ident]["t_end_s"] > stale:
+                out.append(self._close(ident))
+        self._closed = {k: t for k, t in self._closed.items() if t >= t_from}
+        if prm.zones:
+            out += self._zone_events(ws, windows, t_now)
+        if prm.handoff_horizon_s > 0:
+            out += self._handoffs(tracks, live_ids, t_now)
+        return out
+
+    def _close(self, ident: str) -> dict[str, Any]:
+        body = dict(self._open.pop(ident), state="end", open=False)
+        self._closed[ident] = body["t_end_s"]
+        return body
+
+    def _zone_events(
+        self, ws: list[Window], windows: Mapping[int, Window], t_now: float
+    ) -> list[dict[str, Any]]:
+        out = []
+        horizon = 2 * self.params.every_s
+        for e in detect_zone_crossings(ws, self.params.zones):
+            ident = _identity(e)
+            last = self._crossings.get(ident)
+            if last is not None and abs(e.t_start_s - last) <= horizon:
+                continue
+            if last is not None and e.t_start_s < last:
+                continue  # an older crossing already reported (window re-read)
+            self._crossings[ident] = e.t_start_s
+            out.append(self._geo(self._body(e, windows, ident)))
+        cutoff = t_now - self.params.window_s
+        self._crossings = {k: t for k, t in self._crossings.items() if t >= cutoff}
+        return out
+
+    def _handoffs(
+        self, tracks: Sequence[Track], live_ids: set[int], t_now: float
+    ) -> list[dict[str, Any]]:
+        prm = self.params
+        out = []
+        for tr in tracks:
+            if tr.id not in live_ids or len(tr.points) < 2:
+                continue
+            t = tr.t_s
+            last = tr.points[-1]
+            k = max(0, int(np.searchsorted(t, t[-1] - 1.0)) - 1)
+            if t[-1] - t[k] <= 0:
+                continue
+            v = (last.p_enu - tr.points[k].p_enu) / (t[-1] - t[k])
+            current = sorted(last.sensors)[0] if last.sensors else None
+            pred = predict_handoff(
+                self.site.dem,
+                self.site.sensors,
+                last.p_enu,
+                v,
+                current=current if current in self.site.sensors else None,
+                height_m=TARGET_HEIGHT_M.get(tr.cls, 1.5),
+                horizon_s=prm.handoff_horizon_s,
+                dt_s=prm.handoff_dt_s,
+                roads=self.site.roads if tr.cls == "vehicle" else None,
+            )
+            pair = (pred.current, pred.next_sensor)
+            if pred.exit_in_s is None or pred.next_sensor is None:
+                continue
+            if self._handoff.get(tr.id) == pair:
+                continue
+            self._handoff[tr.id] = pair
+            acq = pred.acquisition_enu
+            where = last.p_enu if acq is None else acq
+            details = {
+                "current": pred.current,
+                "next_sensor": pred.next_sensor,
+                "exit_t_s": float(t[-1] + pred.exit_in_s),
+                "next_t_s": None if pred.next_in_s is None else float(t[-1] + pred.next_in_s),
+                "slew": bool(pred.slew),
+                "pan_deg": pred.pan_deg,
+                "tilt_deg": pred.tilt_deg,
+                "speed_mps": float(np.hypot(v[0], v[1])),
+            }
+            e = ActivityEvent(
+                "handoff", float(t[-1]), details["exit_t_s"], (tr.id,), where, details
+            )
+            ident = f"handoff:{tr.id}:{pred.current}>{pred.next_sensor}"
+            body = self._body(e, {}, ident)
+            body["sensors"] = [s for s in pair if s is not None]
+            out.append(self._geo(body))
+        self._handoff = {k: v for k, v in self._handoff.items() if k in live_ids}
+        return out
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    return obj

@@ -1,0 +1,311 @@
+"""Live replay: a sample-site scenario fed into the ingest path as camera processes would.
+
+A scenario (:mod:`demtrack.samplesite.scenarios`) is a time-ordered list of detections
+from the three genlocked cameras. The replay groups them into one batch per camera per
+frame - what a camera process posts to ``POST /api/detections`` - and hands each batch to
+:meth:`demtrack.server.pipeline.Pipeline.ingest`, the call that route makes, paced by the
+wall clock at ``speed`` times real time. Going through the pipeline rather than HTTP keeps
+the same validation, durable commit, geolocation, tracking and publication, without
+loopback HTTP and JSON costs on a small machine and without needing the port (which is
+only known once uvicorn is up when it binds port 0). When ingest cannot keep up (a busy
+two-core machine, or a high speed), the frames already due are sent together as one
+batch in time order - as a buffering camera gateway would - so the replay holds its
+clock instead of drifting behind it.
+
+Several scenarios play at once, each looping on its own period (its span plus a gap) so
+the console always has something moving. Times are shifted so they start after the
+newest time already stored (the ingest refuses a sensor's time going backwards) and grow
+from loop to loop.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from demtrack.core.site import Site
+from demtrack.core.tracking.types import Detection
+
+__all__ = [
+    "Replay",
+    "ReplayFrame",
+    "detection_record",
+    "loop_frames",
+    "merge_frames",
+    "scenario_frames",
+    "scenario_stream",
+    "start_time_after",
+]
+
+log = logging.getLogger("demtrack.server")
+
+#: Seconds of silence between two loops of one scenario (tracks end, then start anew).
+LOOP_GAP_S = 5.0
+
+
+@dataclass(frozen=True)
+class ReplayFrame:
+    """One camera's batch for one frame.
+
+    Parameters
+    ----------
+    t_s : float
+        Frame time on the replay clock (s).
+    sensor : str
+        Camera id.
+    records : tuple of dict
+        Detection records in the ingest format (``{"t", "sensor", "bbox", "class",
+        "score"?, "local_id"?}``), all at ``t_s`` from ``sensor``.
+    """
+
+    t_s: float
+    sensor: str
+    records: tuple[dict[str, Any], ...]
+
+
+def detection_record(d: Detection, t_s: float | None = None) -> dict[str, Any]:
+    """The ingest record of a detection, at time ``t_s`` (default: its own)."""
+    rec: dict[str, Any] = {
+        "t": d.t_s if t_s is None else t_s,
+        "sensor": d.sensor,
+        "bbox": [float(x) for x in d.bbox],
+        "class": d.cls,
+    }
+    if d.score is not None:
+        rec["score"] = d.score
+    if d.local_id is not None:
+        rec["local_id"] = d.local_id
+    return rec
+
+
+def scenario_frames(detections: Sequence[Detection]) -> list[ReplayFrame]:
+    """Group a scenario's detections into per-camera, per-frame batches, in time order.
+
+    Parameters
+    ----------
+    detections : sequence of Detection
+        In time order (as :func:`~demtrack.samplesite.scenarios.make_scenario` makes them).
+
+    Returns
+    -------
+    list of ReplayFrame
+        Ordered by ``(t_s, sensor)``; records keep the scenario's own times.
+    """
+    groups: dict[tuple[float, str], list[dict[str, Any]]] = {}
+    for d in detections:
+        groups.setdefault((float(d.t_s), d.sensor), []).append(detection_record(d))
+    return [ReplayFrame(t, s, tuple(recs)) for (t, s), recs in sorted(groups.items())]
+
+
+def _shifted(frame: ReplayFrame, shift_s: float) -> ReplayFrame:
+    # Rounded to the microsecond so shifted frame times do not drift in the last bits.
+    t = round(frame.t_s + shift_s, 6)
+    return ReplayFrame(t, frame.sensor, tuple({**r, "t": t} for r in frame.records))
+
+
+def loop_frames(
+    frames: Sequence[ReplayFrame],
+    t0_s: float,
+    *,
+    loop: bool = True,
+    gap_s: float = LOOP_GAP_S,
+) -> Iterator[ReplayFrame]:
+    """One scenario's frames with its time 0 moved to ``t0_s``, repeated if ``loop``.
+
+    Loop ``k`` is shifted by ``t0_s + k * period`` with ``period = t_last + gap_s``
+    (scenario times start at 0), so every sensor's times keep growing and a replayed
+    time minus the shift is the scenario's own time (its truth lines up).
+    """
+    if not frames:
+        return
+    period = max(frames[-1].t_s, 0.0) + gap_s
+    for k in itertools.count() if loop else range(1):
+        shift = t0_s + k * period
+        for f in frames:
+            yield _shifted(f, shift)
+
+
+def merge_frames(streams: Iterable[Iterable[ReplayFrame]]) -> Iterator[ReplayFrame]:
+    """Merge time-ordered frame streams into one, ordered by ``(t_s, sensor)``.
+
+    Two scenarios' batches for the same camera and frame are joined into one batch.
+    """
+    merged = heapq.merge(*streams, key=lambda f: (f.t_s, f.sensor))
+    pending: ReplayFrame | None = None
+    for f in merged:
+        if pending is not None and (f.t_s, f.sensor) == (pending.t_s, pending.sensor):
+            pending = ReplayFrame(f.t_s, f.sensor, pending.records + f.records)
+            continue
+        if pending is not None:
+            yield pending
+        pending = f
+    if pending is not None:
+        yield pending
+
+
+def start_time_after(last_times: dict[str, float], gap_s: float = LOOP_GAP_S) -> float:
+    """The replay's first frame time: a whole second at least ``gap_s`` after ``last_times``.
+
+    Parameters
+    ----------
+    last_times : dict
+        Sensor id -> newest stored detection time (s); empty for a fresh store.
+    """
+    if not last_times:
+        return 0.0
+    return float(math.ceil(max(last_times.values()) + gap_s))
+
+
+def scenario_stream(
+    site: Site,
+    names: Sequence[str],
+    t0_s: float,
+    *,
+    loop: bool = True,
+    gap_s: float = LOOP_GAP_S,
+) -> Iterator[ReplayFrame]:
+    """Frames of the named sample-site scenarios played together from ``t0_s``.
+
+    Each scenario is generated (:func:`~demtrack.samplesite.scenarios.make_scenario`,
+    default noise and seed; about a second each) and loops on its own period.
+
+    Raises
+    ------
+    SiteError
+        An unknown scenario, or a site that is not a generated sample site.
+    """
+    from demtrack.samplesite.scenarios import make_scenario
+
+    streams = [
+        loop_frames(
+            scenario_frames(make_scenario(site, name).detections), t0_s, loop=loop, gap_s=gap_s
+        )
+        for name in names
+    ]
+    return merge_frames(streams)
+
+
+class Replay:
+    """Feeds frames to ``send`` in a daemon thread, paced at ``speed`` x real time.
+
+    Parameters
+    ----------
+    make_frames : callable
+        Returns the frames to play (an iterable in time order, possibly endless). Called
+        in the replay thread, so slow scenario generation does not hold up start-up.
+    send : callable
+        ``send(records)`` ingests one batch (e.g. :meth:`Pipeline.ingest`) and returns
+        its acknowledgement (a dict with ``accepted``).
+    speed : float
+        Replay-clock seconds per wall-clock second (> 0).
+    max_lag_s : float
+        When sending falls this far behind the clock (a slow machine), the clock is
+        moved on instead of sending a burst to catch up.
+    max_coalesce : int
+        When ingest cannot keep up, the frames already due (up to this many) are sent as
+        one batch, in time order, instead of one batch per camera per frame.
+    clock : callable
+        Monotonic wall clock (s).
+
+    Attributes
+    ----------
+    n_batches, n_frames, n_records, n_accepted : int
+        Batches sent, frames in them, records in them, records the ingest accepted.
+    t_s : float or None
+        Time of the last frame sent.
+    error : BaseException or None
+        What stopped the replay early, if anything.
+    """
+
+    def __init__(
+        self,
+        make_frames: Callable[[], Iterable[ReplayFrame]],
+        send: Callable[[list[dict[str, Any]]], Any],
+        *,
+        speed: float = 1.0,
+        max_lag_s: float = 2.0,
+        max_coalesce: int = 60,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        if not (math.isfinite(speed) and speed > 0):
+            raise ValueError(f"replay speed must be a positive number, got {speed}")
+        self.make_frames = make_frames
+        self.send = send
+        self.speed = float(speed)
+        self.max_lag_s = float(max_lag_s)
+        self.max_coalesce = max(1, int(max_coalesce))
+        self.clock = clock
+        self.n_batches = 0
+        self.n_frames = 0
+        self.n_records = 0
+        self.n_accepted = 0
+        self.t_s: float | None = None
+        self.error: BaseException | None = None
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @property
+    def running(self) -> bool:
+        """Whether the replay thread is alive."""
+        return self._thread is not None and self._thread.is_alive()
+
+    def start(self) -> Replay:
+        """Start the replay thread (once)."""
+        if self._thread is not None:
+            raise RuntimeError("replay already started")
+        self._thread = threading.Thread(target=self._run, name="demtrack-replay", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self, timeout_s: float = 10.0) -> bool:
+        """Ask the thread to stop after the batch in flight; True once it has ended."""
+        self._stop.set()
+        if self._thread is None:
+            return True
+        self._thread.join(timeout_s)
+        return not self._thread.is_alive()
+
+    def _run(self) -> None:
+        try:
+            self._play(self.make_frames())
+        except BaseException as exc:  # noqa: BLE001 - reported, never raised in a thread
+            self.error = exc
+            log.error("replay stopped: %s", exc)
+
+    def _play(self, frames: Iterable[ReplayFrame]) -> None:
+        it = iter(frames)
+        frame = next(it, None)
+        if frame is None:
+            return
+        wall0, t0 = self.clock(), frame.t_s
+
+        def due(f: ReplayFrame) -> float:
+            return wall0 + (f.t_s - t0) / self.speed
+
+        while frame is not None and not self._stop.is_set():
+            wait = due(frame) - self.clock()
+            if wait > 0 and self._stop.wait(wait):
+                return
+            if -wait > self.max_lag_s:
+                wall0 += -wait  # far behind: move the clock on rather than burst
+            # Frames already due go together, as a buffering camera gateway sends them.
+            batch = [frame]
+            frame = next(it, None)
+            now = self.clock()
+            while frame is not None and len(batch) < self.max_coalesce and due(frame) <= now:
+                batch.append(frame)
+                frame = next(it, None)
+            records = [r for f in batch for r in f.records]
+            ack = self.send(records)
+            self.n_batches += 1
+            self.n_frames += len(batch)
+            self.n_records += len(records)
+            self.n_accepted += int(ack.get("accepted", 0)) if isinstance(ack, dict) else 0
+            self.t_s = batch[-1].t_s

@@ -1,0 +1,286 @@
+"""``/api/synopsis``: the activity synopsis of a time window (Collins et al. 1998, Fig. 8).
+
+Each long-term trajectory of the window is split into *tracked* parts (runs of points
+with no gap between them, with the sensors that saw each run and when) and *gap* parts
+(the target was seen by no sensor for longer than the tracker's gap threshold: the
+sensors before and after, the gap's duration, and whether it was a hand-off, i.e. other
+sensors picked the target up), together with the events of the window.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Literal
+
+from fastapi import APIRouter, HTTPException, Query
+from pydantic import BaseModel, ConfigDict, Field
+
+from ..messages import EventBody
+from ..state import StateDep
+from .tracks import filter_tracks
+
+__all__ = [
+    "GapPart",
+    "SynopsisOut",
+    "SynopsisPoint",
+    "TrackedPart",
+    "Trajectory",
+    "router",
+    "synopsis",
+]
+
+router = APIRouter(prefix="/api/synopsis", tags=["synopsis"])
+
+
+class _Out(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class SynopsisPoint(_Out):
+    """A trajectory point: time (s), site frame (m), WGS84 (h above the ellipsoid)."""
+
+    t_s: float
+    e_m: float
+    n_m: float
+    u_m: float
+    lat_deg: float
+    lon_deg: float
+    h_m: float
+
+
+class SensorSpan(_Out):
+    """When one sensor contributed to a tracked part."""
+
+    sensor: str
+    t_start_s: float
+    t_end_s: float
+    n_points: int
+
+
+class TrackedPart(_Out):
+    """A run of the trajectory with no gap."""
+
+    kind: Literal["tracked"] = "tracked"
+    t_start_s: float
+    t_end_s: float
+    duration_s: float
+    sensors: list[str]
+    sensor_spans: list[SensorSpan]
+    n_points: int
+    length_m: float = Field(description="horizontal path length (m)")
+    path: list[SynopsisPoint] = Field(
+        description="the run's points, at most one per step_s (first and last kept)"
+    )
+
+
+class GapPart(_Out):
+    """A stretch where no sensor saw the target."""
+
+    kind: Literal["gap"] = "gap"
+    t_start_s: float
+    t_end_s: float
+    duration_s: float
+    sensors_before: list[str] = Field(description="sensors of the last point before the gap")
+    sensors_after: list[str] = Field(description="sensors of the first point after it")
+    handoff: bool = Field(description="the target was picked up by a sensor that had not seen it")
+    distance_m: float = Field(description="horizontal distance across the gap (m)")
+    start: SynopsisPoint
+    end: SynopsisPoint
+
+
+Part = Annotated[TrackedPart | GapPart, Field(discriminator="kind")]
+
+
+class Trajectory(_Out):
+    """One track's long-term trajectory inside the window."""
+
+    track_id: int
+    cls: Literal["vehicle", "human"]
+    live: bool
+    t_start_s: float
+    t_end_s: float
+    duration_s: float
+    sensors: list[str]
+    n_points: int
+    length_m: float
+    n_gaps: int
+    n_handoffs: int
+    parts: list[Part] = Field(description="tracked parts and gaps in time order")
+    event_ids: list[int] = Field(description="ids of the window's events involving it")
+
+
+class SynopsisOut(_Out):
+    """The synopsis of a time window."""
+
+    t0: float | None
+    t1: float | None
+    n_trajectories: int
+    n_gaps: int
+    n_handoffs: int
+    by_class: dict[str, int]
+    events_by_kind: dict[str, int]
+    trajectories: list[Trajectory]
+    events: list[EventBody]
+
+
+def _point(p: dict[str, Any]) -> dict[str, float]:
+    return {k: p[k] for k in ("t_s", "e_m", "n_m", "u_m", "lat_deg", "lon_deg", "h_m")}
+
+
+def _length(points: list[dict[str, Any]]) -> float:
+    return float(
+        sum(
+            math.hypot(b["e_m"] - a["e_m"], b["n_m"] - a["n_m"])
+            for a, b in zip(points, points[1:], strict=False)
+        )
+    )
+
+
+def _in_gap(a: float, b: float, gaps: list[list[float]]) -> bool:
+    return any(g0 <= a and b <= g1 for g0, g1 in gaps)
+
+
+def _tracked(points: list[dict[str, Any]], step_s: float) -> dict[str, Any]:
+    spans: dict[str, list[float]] = {}
+    for p in points:
+        for s in p["sensors"]:
+            span = spans.setdefault(s, [p["t_s"], p["t_s"], 0])
+            span[1] = p["t_s"]
+            span[2] += 1
+    path, last_t = [], -math.inf
+    for k, p in enumerate(points):
+        if p["t_s"] - last_t >= step_s or k == len(points) - 1:
+            path.append(_point(p))
+            last_t = p["t_s"]
+    t0, t1 = points[0]["t_s"], points[-1]["t_s"]
+    return {
+        "kind": "tracked",
+        "t_start_s": t0,
+        "t_end_s": t1,
+        "duration_s": t1 - t0,
+        "sensors": sorted(spans),
+        "sensor_spans": [
+            {"sensor": s, "t_start_s": a, "t_end_s": b, "n_points": int(n)}
+            for s, (a, b, n) in sorted(spans.items(), key=lambda kv: (kv[1][0], kv[0]))
+        ],
+        "n_points": len(points),
+        "length_m": _length(points),
+        "path": path,
+    }
+
+
+def _gap(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
+    before, after = sorted(a["sensors"]), sorted(b["sensors"])
+    return {
+        "kind": "gap",
+        "t_start_s": a["t_s"],
+        "t_end_s": b["t_s"],
+        "duration_s": b["t_s"] - a["t_s"],
+        "sensors_before": before,
+        "sensors_after": after,
+        "handoff": bool(set(after) - set(before)),
+        "distance_m": math.hypot(b["e_m"] - a["e_m"], b["n_m"] - a["n_m"]),
+        "start": _point(a),
+        "end": _point(b),
+    }
+
+
+def trajectory(body: dict[str, Any], step_s: float) -> dict[str, Any]:
+    """A (clipped) stored track body split into tracked parts and gaps."""
+    pts = body["points"]
+    parts: list[dict[str, Any]] = []
+    run = [pts[0]]
+    for a, b in zip(pts, pts[1:], strict=False):
+        if _in_gap(a["t_s"], b["t_s"], body["gaps"]):
+            parts.append(_tracked(run, step_s))
+            parts.append(_gap(a, b))
+            run = []
+        run.append(b)
+    parts.append(_tracked(run, step_s))
+    gaps = [p for p in parts if p["kind"] == "gap"]
+    t0, t1 = pts[0]["t_s"], pts[-1]["t_s"]
+    return {
+        "track_id": body["id"],
+        "cls": body["cls"],
+        "live": body["live"],
+        "t_start_s": t0,
+        "t_end_s": t1,
+        "duration_s": t1 - t0,
+        "sensors": sorted({s for p in pts for s in p["sensors"]}),
+        "n_points": len(pts),
+        "length_m": sum(p["length_m"] for p in parts if p["kind"] == "tracked"),
+        "n_gaps": len(gaps),
+        "n_handoffs": sum(g["handoff"] for g in gaps),
+        "parts": parts,
+        "event_ids": [],
+    }
+
+
+def synopsis(
+    bodies: list[dict[str, Any]],
+    events: list[dict[str, Any]],
+    t0: float | None,
+    t1: float | None,
+    step_s: float,
+    filtered: bool,
+) -> dict[str, Any]:
+    """Assemble the synopsis from clipped track bodies and the window's events.
+
+    With ``filtered`` (a class or sensor filter was given), only events that involve a
+    listed trajectory are kept.
+    """
+    trajs = [trajectory(b, step_s) for b in bodies]
+    by_id = {t["track_id"]: t for t in trajs}
+    kept = []
+    for e in events:
+        mine = [by_id[i] for i in e["track_ids"] if i in by_id]
+        if filtered and not mine:
+            continue
+        kept.append(e)
+        for t in mine:
+            if e.get("id") is not None:
+                t["event_ids"].append(e["id"])
+    by_class: dict[str, int] = {}
+    for t in trajs:
+        by_class[t["cls"]] = by_class.get(t["cls"], 0) + 1
+    kinds: dict[str, int] = {}
+    for e in kept:
+        kinds[e["kind"]] = kinds.get(e["kind"], 0) + 1
+    return {
+        "t0": t0,
+        "t1": t1,
+        "n_trajectories": len(trajs),
+        "n_gaps": sum(t["n_gaps"] for t in trajs),
+        "n_handoffs": sum(t["n_handoffs"] for t in trajs),
+        "by_class": by_class,
+        "events_by_kind": kinds,
+        "trajectories": trajs,
+        "events": kept,
+    }
+
+
+@router.get("", response_model=SynopsisOut, summary="Activity synopsis of a time window")
+def get_synopsis(
+    state: StateDep,
+    t0: float | None = Query(None, description="window start (s)", allow_inf_nan=False),
+    t1: float | None = Query(None, description="window end (s)", allow_inf_nan=False),
+    cls: Literal["vehicle", "human"] | None = Query(None, alias="class"),
+    sensor: str | None = Query(None, max_length=200, description="seen by this sensor"),
+    step_s: float = Query(
+        1.0, gt=0, le=3600, allow_inf_nan=False, description="path point spacing (s)"
+    ),
+) -> dict[str, Any]:
+    """The long-term trajectories of ``[t0, t1]`` split into tracked parts and gaps.
+
+    Tracks are selected as ``GET /api/tracks`` selects them (points clipped to the
+    window). A gap is a stretch longer than the tracker's gap threshold in which no
+    sensor saw the target; it lists the sensors before and after and is a hand-off when
+    a sensor that had not seen the target picked it up. ``events`` are the stored events
+    overlapping the window (``GET /api/events``), only those involving a listed
+    trajectory when a class or sensor filter is given.
+    """
+    if t0 is not None and t1 is not None and t0 > t1:
+        raise HTTPException(422, f"t0 ({t0}) is after t1 ({t1})")
+    bodies = filter_tracks(state, t0, t1, cls, sensor, None)
+    events = state.store.activity(t_from=t0, t_to=t1)
+    return synopsis(bodies, events, t0, t1, step_s, cls is not None or sensor is not None)

@@ -1,0 +1,587 @@
+"""The viser 3D scene: terrain, cameras, roads, and the live rays, hits and tracks.
+
+viser runs its own HTTP + WebSocket server (its web client ships in the wheel) on its own
+port, bound to the API's host. The static scene is the DEM as a mesh (decimated to a few
+hundred vertices a side) textured with the orthophoto, each sensor's camera as a frustum
+at its pose with its still on the image plane, and the road centre lines draped on the
+DEM. The live part follows the same stream messages the WebSocket sends (the pipeline's
+publisher is fanned out to :meth:`Scene3D.publish`): for each new fix its viewing ray
+with every terrain hit marked (the newest ``max_rays`` rays are kept), the hit the
+tracker used highlighted, and each track as a coloured polyline.
+
+Everything is in the site frame (x east, y north, z up, m), which is viser's default
+``+z`` up world. viser's frustums follow the OpenCV camera convention (x right, y down,
+z forward), the same as ``R_world_cam``, so a frustum's orientation is ``R_world_cam``
+as a quaternion.
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import io
+import logging
+import math
+import threading
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from demtrack.core.camera import Intrinsics
+from demtrack.core.dem import Dem
+from demtrack.core.grid import GridSpec
+from demtrack.core.site import Site
+
+__all__ = [
+    "Scene3D",
+    "TerrainMesh",
+    "display_host",
+    "frustum_fov_aspect",
+    "polyline_segments",
+    "road_polylines",
+    "terrain_mesh",
+    "texture_uv",
+    "track_colour",
+    "wxyz_from_matrix",
+]
+
+log = logging.getLogger("demtrack.server")
+
+_PALETTE = np.array(
+    [
+        (230, 25, 75),
+        (60, 180, 75),
+        (0, 130, 200),
+        (245, 130, 48),
+        (145, 30, 180),
+        (70, 240, 240),
+        (240, 50, 230),
+        (210, 245, 60),
+        (0, 128, 128),
+        (170, 110, 40),
+    ],
+    dtype=np.uint8,
+)
+_SENSOR_COLOURS = [(255, 215, 0), (0, 200, 255), (255, 105, 180), (160, 255, 120)]
+_LIFT_M = 0.4  # draw lines this far above the terrain so the mesh does not swallow them
+_MAX_TRACKS = 40
+
+
+def wxyz_from_matrix(R: np.ndarray) -> np.ndarray:  # noqa: N803 - a rotation matrix is R
+    """Unit quaternion ``(w, x, y, z)`` (``w >= 0``) of a proper rotation matrix.
+
+    Parameters
+    ----------
+    R : ndarray, shape (3, 3)
+        Rotation (orthonormal, determinant +1), e.g. ``R_world_cam``.
+
+    Returns
+    -------
+    ndarray, shape (4,)
+    """
+    m = np.asarray(R, dtype=np.float64)
+    tr = m[0, 0] + m[1, 1] + m[2, 2]
+    # Shepperd: take the largest of the four candidates' squares for stability.
+    cand = np.array([tr, m[0, 0], m[1, 1], m[2, 2]])
+    k = int(np.argmax(cand))
+    if k == 0:
+        s = 2.0 * math.sqrt(1.0 + tr)
+        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+    elif k == 1:
+        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
+    elif k == 2:
+        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
+    else:
+        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
+    out = np.array(q)
+    out /= np.linalg.norm(out)
+    return -out if out[0] < 0 else out
+
+
+def frustum_fov_aspect(intrinsics: Intrinsics) -> tuple[float, float]:
+    """Viser's frustum ``(fov, aspect)``: vertical field of view (rad), width / height.
+
+    From the undistorted image edges (the image spans ``u in [-0.5, width - 0.5]``,
+    ``v in [-0.5, height - 0.5]``) through the principal point, so the frustum's edges
+    are the rays of the image's edge midpoints when the principal point is centred and
+    the distortion radial.
+    """
+    i = intrinsics
+    xn, yn = i.undistort(
+        np.array([-0.5, i.width - 0.5, i.cx, i.cx]), np.array([i.cy, i.cy, -0.5, i.height - 0.5])
+    )
+    tan_x = 0.5 * float(xn[1] - xn[0])
+    tan_y = 0.5 * float(yn[3] - yn[2])
+    return 2.0 * math.atan(tan_y), tan_x / tan_y
+
+
+@dataclass(frozen=True)
+class TerrainMesh:
+    """A triangle mesh of the DEM surface.
+
+    Attributes
+    ----------
+    vertices : ndarray, shape (n, 3)
+        Site frame (m): decimated cell centres at their elevation.
+    faces : ndarray, shape (m, 3)
+        Vertex indices, counter-clockwise seen from above (normals up); no face
+        touches a nodata cell.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+
+
+def _take(n: int, step: int) -> np.ndarray:
+    idx = np.arange(0, n, step)
+    return idx if idx[-1] == n - 1 else np.append(idx, n - 1)
+
+
+def terrain_mesh(dem: Dem, max_side: int = 250) -> TerrainMesh:
+    """The DEM's surface on at most ``max_side`` vertices per side.
+
+    Vertices are cell centres (every ``step``-th row and column, always including the
+    last), at the cell's elevation.
+    """
+    g = dem.grid
+    step = max(1, math.ceil(max(g.nrows, g.ncols) / max_side))
+    rows, cols = _take(g.nrows, step), _take(g.ncols, step)
+    z = np.asarray(dem.elevation, dtype=np.float64)[np.ix_(rows, cols)]
+    x = g.x_min + (cols + 0.5) * g.cell_m
+    y = g.y_max - (rows + 0.5) * g.cell_m
+    xx, yy = np.meshgrid(x, y)
+    ok = np.isfinite(z)
+    zf = np.where(ok, z, np.nanmin(z) if ok.any() else 0.0)
+    vertices = np.column_stack([xx.ravel(), yy.ravel(), zf.ravel()])
+    nr, nc = len(rows), len(cols)
+    idx = np.arange(nr * nc).reshape(nr, nc)
+    nw, ne, sw, se = idx[:-1, :-1], idx[:-1, 1:], idx[1:, :-1], idx[1:, 1:]
+    okf = ok.ravel()
+    tris = np.concatenate(
+        [np.stack([nw, sw, se], -1).reshape(-1, 3), np.stack([nw, se, ne], -1).reshape(-1, 3)]
+    )
+    tris = tris[okf[tris].all(axis=1)]
+    return TerrainMesh(vertices, tris.astype(np.int32))
+
+
+def texture_uv(xy: np.ndarray, grid: GridSpec) -> np.ndarray:
+    """Texture coordinates of site-frame points on an image covering ``grid``.
+
+    ``u`` runs west to east over the grid's outer edges and ``v`` south to north
+    (0 at the bottom row's southern edge), the OBJ / trimesh convention.
+
+    Parameters
+    ----------
+    xy : ndarray, shape (n, 2)
+        Site frame east, north (m).
+    grid : GridSpec
+        The image's grid (row 0 north).
+
+    Returns
+    -------
+    ndarray, shape (n, 2)
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    u = (xy[:, 0] - grid.x_min) / (grid.ncols * grid.cell_m)
+    v = (xy[:, 1] - grid.y_min) / (grid.nrows * grid.cell_m)
+    return np.column_stack([u, v])
+
+
+def road_polylines(site: Site, step_m: float = 2.0, lift_m: float = _LIFT_M) -> list[np.ndarray]:
+    """Road centre lines draped on the DEM: one ``(k, 3)`` array (site frame, m) each."""
+    if site.roads is None:
+        return []
+    out = []
+    for line in site.roads.lines:
+        n = max(2, int(math.ceil(line.length / step_m)) + 1)
+        pts = np.array([line.interpolate(s).coords[0] for s in np.linspace(0, line.length, n)])
+        z = site.dem.sample(pts[:, 0], pts[:, 1])
+        keep = np.isfinite(z)
+        if keep.sum() >= 2:
+            out.append(np.column_stack([pts[keep, :2], z[keep] + lift_m]))
+    return out
+
+
+def polyline_segments(points: np.ndarray) -> np.ndarray:
+    """Consecutive point pairs of a polyline: shape ``(k - 1, 2, 3)``."""
+    p = np.asarray(points, dtype=np.float64)
+    return np.stack([p[:-1], p[1:]], axis=1)
+
+
+def track_colour(track_id: int) -> tuple[int, int, int]:
+    """A track's colour (RGB 0-255), fixed by its id."""
+    c = _PALETTE[int(track_id) % len(_PALETTE)]
+    return int(c[0]), int(c[1]), int(c[2])
+
+
+def display_host(host: str) -> str:
+    """The host to put in URLs for a bind address (a wildcard becomes 127.0.0.1)."""
+    if host in ("", "0.0.0.0", "::", "[::]"):
+        return "127.0.0.1"
+    return f"[{host}]" if ":" in host and not host.startswith("[") else host
+
+
+@dataclass
+class _Ray:
+    det_id: int
+    sensor: str
+    origin: np.ndarray
+    hits: np.ndarray  # (k, 3), road hit appended last when there is one
+    chosen: int | None = None
+
+
+@dataclass
+class _Track:
+    id: int
+    cls: str
+    live: bool
+    points: list[tuple[float, float, float]] = field(default_factory=list)
+    det_ids: list[list[int]] = field(default_factory=list)
+    t_last: float = 0.0
+
+
+class Scene3D:
+    """The viser server and its scene, updated from stream messages.
+
+    Parameters
+    ----------
+    site : Site
+    host : str
+        Address to bind (the API's host).
+    port : int
+        Port (0 = any free one; viser also moves off a busy port).
+    max_rays : int
+        Newest viewing rays kept.
+    mesh_side : int
+        Most terrain vertices per side.
+    texture_px : int
+        Largest side of the orthophoto texture (px).
+
+    Attributes
+    ----------
+    server : viser.ViserServer
+    url : str
+        ``http://host:port/`` of the scene.
+    nodes : dict
+        Scene node name -> viser handle of what this class added.
+    """
+
+    def __init__(
+        self,
+        site: Site,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 8080,
+        max_rays: int = 40,
+        mesh_side: int = 250,
+        texture_px: int = 2048,
+        update_s: float = 0.25,
+    ) -> None:
+        import viser
+
+        self.site = site
+        self.max_rays = max_rays
+        self.mesh_side = mesh_side
+        self.texture_px = texture_px
+        self.update_s = update_s
+        with contextlib.redirect_stdout(io.StringIO()):  # viser prints a banner: we print URLs
+            self.server = viser.ViserServer(host=host, port=port, label="demtrack", verbose=False)
+        self.url = f"http://{display_host(host)}:{self.server.get_port()}/"
+        self.nodes: dict[str, Any] = {}
+        self.n_messages = 0
+        self.n_dropped = 0
+        self.error: BaseException | None = None
+        self._inbox: collections.deque[dict[str, Any]] = collections.deque()
+        self._inbox_max = 20_000
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self._ready = threading.Event()
+        self._rays: collections.deque[_Ray] = collections.deque(maxlen=max_rays)
+        self._tracks: dict[int, _Track] = {}
+        self._dirty_rays = False
+        self._dirty_tracks: set[int] = set()
+        self._thread = threading.Thread(target=self._run, name="demtrack-scene3d", daemon=True)
+        self._thread.start()
+
+    # ----------------------------------------------------------------- public
+    def publish(self, messages: list[dict[str, Any]]) -> None:
+        """Queue stream messages (any thread; never blocks). The oldest drop when full."""
+        for m in messages:
+            if m.get("type") in ("fix", "track_update"):
+                if len(self._inbox) >= self._inbox_max:
+                    self._inbox.popleft()
+                    self.n_dropped += 1
+                self._inbox.append(m)
+        self._wake.set()
+
+    def wait_ready(self, timeout_s: float | None = None) -> bool:
+        """Wait until the static scene (terrain, cameras, roads) is built."""
+        return self._ready.wait(timeout_s)
+
+    def flush(self, timeout_s: float = 10.0) -> bool:
+        """Wait until every queued message has been drawn (for tests)."""
+        done = threading.Event()
+        self._inbox.append({"type": "_flush", "event": done})
+        self._wake.set()
+        return done.wait(timeout_s)
+
+    def stop(self) -> None:
+        """Stop the updater and the viser server."""
+        self._stop.set()
+        self._wake.set()
+        self._thread.join(10.0)
+        self.server.stop()
+
+    # ----------------------------------------------------------------- static
+    def _add(self, name: str, handle: Any) -> Any:
+        self.nodes[name] = handle
+        return handle
+
+    def _build_static(self) -> None:
+        scene = self.server.scene
+        site = self.site
+        g = site.dem.grid
+        lo, hi = site.dem.elevation_range()
+        span = max(g.ncols, g.nrows) * g.cell_m
+        cam = self.server.initial_camera
+        cx, cy = 0.5 * (g.bounds[0] + g.bounds[2]), 0.5 * (g.bounds[1] + g.bounds[3])
+        cam.position = (cx, cy - 0.65 * span, hi + 0.45 * span)
+        cam.look_at = (cx, cy, lo)
+        cam.up = (0.0, 0.0, 1.0)
+        cam.near = 0.5
+        cam.far = 20.0 * span
+        self._add_terrain()
+        for k, sensor in enumerate(sorted(site.sensors.values(), key=lambda s: s.id)):
+            self._add_camera(sensor, _SENSOR_COLOURS[k % len(_SENSOR_COLOURS)], span)
+        roads = road_polylines(site)
+        if roads:
+            segs = np.concatenate([polyline_segments(p) for p in roads])
+            self._add(
+                "/roads",
+                scene.add_line_segments(
+                    "/roads", segs, (250, 250, 250), thickness=3.0, thickness_units="screen"
+                ),
+            )
+
+    def _add_terrain(self) -> None:
+        import trimesh
+        from PIL import Image
+
+        from demtrack.core.orthophoto import read_orthophoto
+
+        mesh = terrain_mesh(self.site.dem, self.mesh_side)
+        visual: Any = None
+        if self.site.orthophoto_path is not None:
+            rgb, grid = read_orthophoto(self.site.orthophoto_path)
+            image = Image.fromarray(rgb)
+            image.thumbnail((self.texture_px, self.texture_px))
+            uv = texture_uv(mesh.vertices[:, :2], grid)
+            material = trimesh.visual.material.SimpleMaterial(image=image, diffuse=(255,) * 4)
+            visual = trimesh.visual.TextureVisuals(uv=uv, image=image, material=material)
+        else:
+            z = mesh.vertices[:, 2]
+            t = (z - z.min()) / max(float(np.ptp(z)), 1e-9)
+            colours = np.column_stack(
+                [80 + 120 * t, 140 + 60 * t, 80 + 40 * t, np.full_like(t, 255)]
+            )
+            visual = trimesh.visual.ColorVisuals(vertex_colors=colours.astype(np.uint8))
+        tm = trimesh.Trimesh(mesh.vertices, mesh.faces, visual=visual, process=False)
+        self._add("/terrain", self.server.scene.add_mesh_trimesh("/terrain", tm))
+
+    def _add_camera(self, sensor: Any, colour: tuple[int, int, int], span: float) -> None:
+        scene = self.server.scene
+        camera = sensor.camera
+        fov, aspect = frustum_fov_aspect(camera.intrinsics)
+        image = None
+        if sensor.image_path is not None and sensor.image_path.is_file():
+            from PIL import Image
+
+            with Image.open(sensor.image_path) as im:
+                im = im.convert("RGB")
+                im.thumbnail((480, 480))
+                image = np.asarray(im)
+        name = f"/cameras/{sensor.id}"
+        self._add(
+            name,
+            scene.add_camera_frustum(
+                name,
+                fov=fov,
+                aspect=aspect,
+                scale=0.05 * span,
+                thickness=2.0,
+                thickness_units="screen",
+                color=colour,
+                image=image,
+                wxyz=wxyz_from_matrix(camera.R_world_cam),
+                position=tuple(float(x) for x in camera.position_enu),
+            ),
+        )
+        label = f"/labels/{sensor.id}"
+        self._add(
+            label,
+            scene.add_label(
+                label,
+                f"{sensor.id} ({sensor.name})",
+                position=tuple(float(x) for x in camera.position_enu + [0.0, 0.0, 3.0]),
+            ),
+        )
+
+    # ------------------------------------------------------------------- live
+    def _run(self) -> None:
+        try:
+            self._build_static()
+            self._ready.set()
+            while not self._stop.is_set():
+                self._wake.wait(self.update_s)
+                self._wake.clear()
+                flushes = self._drain()
+                self._render()
+                for ev in flushes:
+                    ev.set()
+                if not self._stop.is_set():
+                    self._stop.wait(self.update_s)  # draw at most every update_s
+        except BaseException as exc:  # noqa: BLE001 - a dead scene must not take the server
+            self.error = exc
+            log.exception("3D scene stopped")
+        finally:
+            self._ready.set()
+
+    def _drain(self) -> list[threading.Event]:
+        flushes = []
+        while self._inbox:
+            m = self._inbox.popleft()
+            kind = m.get("type")
+            if kind == "fix":
+                self._on_fix(m["fix"])
+            elif kind == "track_update":
+                self._on_track(m["track"])
+            elif kind == "_flush":
+                flushes.append(m["event"])
+            self.n_messages += 1
+        return flushes
+
+    def _on_fix(self, fix: dict[str, Any]) -> None:
+        hits = [[h["e_m"], h["n_m"], h["u_m"]] for h in fix.get("hits") or []]
+        road = fix.get("road_hit")
+        if road is not None:
+            hits.append([road["e_m"], road["n_m"], road["u_m"]])
+        if not hits:
+            return
+        ray = _Ray(
+            int(fix["detection_id"]),
+            str(fix["sensor"]),
+            np.asarray(fix["origin_enu"], dtype=np.float64),
+            np.asarray(hits, dtype=np.float64),
+        )
+        self._rays.append(ray)
+        self._dirty_rays = True
+
+    def _on_track(self, body: dict[str, Any]) -> None:
+        tid = int(body["id"])
+        tr = self._tracks.get(tid)
+        if tr is None:
+            tr = self._tracks[tid] = _Track(tid, str(body["cls"]), bool(body["live"]))
+        first = int(body.get("first_index", 0))
+        if first > len(tr.points):  # a missed update: keep what we have, append the rest
+            first = len(tr.points)
+        pts = body.get("points") or []
+        del tr.points[first:], tr.det_ids[first:]
+        for p in pts:
+            tr.points.append((p["e_m"], p["n_m"], p["u_m"]))
+            tr.det_ids.append([int(i) for i in p.get("detection_ids", [])])
+        tr.live = bool(body["live"])
+        if pts:
+            tr.t_last = float(pts[-1]["t_s"])
+        self._dirty_tracks.add(tid)
+        # The tracker's choice among a ray's hits: the one nearest the point it made.
+        by_det = {r.det_id: r for r in self._rays}
+        for p in pts:
+            for det in p.get("detection_ids", []):
+                ray = by_det.get(int(det))
+                if ray is not None:
+                    q = np.array([p["e_m"], p["n_m"], p["u_m"]])
+                    ray.chosen = int(np.argmin(np.linalg.norm(ray.hits - q, axis=1)))
+                    self._dirty_rays = True
+
+    def _render(self) -> None:
+        scene = self.server.scene
+        if self._dirty_rays and self._rays:
+            self._dirty_rays = False
+            sensors = sorted(self.site.sensors)
+            segs, colours, all_hits, chosen = [], [], [], []
+            for r in self._rays:
+                far = r.hits[np.argmax(np.linalg.norm(r.hits - r.origin, axis=1))]
+                segs.append([r.origin, far])
+                k = sensors.index(r.sensor) if r.sensor in sensors else 0
+                colours.append([_SENSOR_COLOURS[k % len(_SENSOR_COLOURS)]] * 2)
+                all_hits.append(r.hits)
+                if r.chosen is not None:
+                    chosen.append(r.hits[r.chosen])
+            self._add(
+                "/rays/lines",
+                scene.add_line_segments(
+                    "/rays/lines",
+                    np.asarray(segs),
+                    np.asarray(colours, dtype=np.uint8),
+                    thickness=1.5,
+                    thickness_units="screen",
+                ),
+            )
+            self._add(
+                "/rays/hits",
+                scene.add_point_cloud(
+                    "/rays/hits",
+                    np.concatenate(all_hits).astype(np.float32),
+                    (255, 255, 255),
+                    point_size=1.5,
+                    point_shape="circle",
+                    precision="float32",
+                ),
+            )
+            pts = np.asarray(chosen, dtype=np.float32).reshape(-1, 3)
+            self._add(
+                "/rays/chosen",
+                scene.add_point_cloud(
+                    "/rays/chosen",
+                    pts,
+                    (255, 30, 30),
+                    point_size=3.0,
+                    point_shape="circle",
+                    precision="float32",
+                ),
+            )
+        if self._dirty_tracks:
+            self._prune_tracks()
+            for tid in sorted(self._dirty_tracks):
+                tr = self._tracks.get(tid)
+                if tr is None or len(tr.points) < 2:
+                    continue
+                p = np.asarray(tr.points) + [0.0, 0.0, _LIFT_M]
+                name = f"/tracks/{tid}"
+                colour = track_colour(tid)
+                self._add(
+                    name,
+                    scene.add_line_segments(
+                        name,
+                        polyline_segments(p),
+                        colour if tr.live else tuple(int(0.5 * c + 64) for c in colour),
+                        thickness=4.0 if tr.live else 2.0,
+                        thickness_units="screen",
+                    ),
+                )
+            self._dirty_tracks.clear()
+
+    def _prune_tracks(self) -> None:
+        if len(self._tracks) <= _MAX_TRACKS:
+            return
+        ended = sorted((t for t in self._tracks.values() if not t.live), key=lambda t: t.t_last)
+        for tr in ended[: len(self._tracks) - _MAX_TRACKS]:
+            del self._tracks[tr.id]
+            self._dirty_tracks.discard(tr.id)
+            handle = self.nodes.pop(f"/tracks/{tr.id}", None)
+            if handle is not None:
+                handle.remove()
