@@ -18,12 +18,12 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import shapely
 
 from .dem import Dem
 from .pantilt import wrap_deg
 from .roads import RoadNetwork
 from .site import Sensor
+from .tracking.roadfollow import follow_road
 from .tracking.types import TruthPath
 from .visibility import target_visible_fraction
 
@@ -73,27 +73,7 @@ def _along_road(
     roads: RoadNetwork, p: np.ndarray, v: np.ndarray, times: np.ndarray, snap_m: float
 ) -> np.ndarray | None:
     """Future ground positions following the nearest road, or None if off the roads."""
-    speed = float(np.hypot(v[0], v[1]))
-    here = shapely.Point(p[0], p[1])
-    k = int(np.argmin([line.distance(here) for line in roads.lines]))
-    line = roads.lines[k]
-    if speed < 0.1 or line.distance(here) > snap_m:
-        return None
-    s0 = line.project(here)
-    ahead = line.interpolate(min(s0 + 1.0, line.length))
-    behind = line.interpolate(max(s0 - 1.0, 0.0))
-    tangent = np.array([ahead.x - behind.x, ahead.y - behind.y])
-    sign = 1.0 if tangent @ v[:2] >= 0 else -1.0
-    on = line.interpolate(s0)
-    offset = np.array([p[0] - on.x, p[1] - on.y])  # keep the lane offset
-    s = s0 + sign * speed * times
-    if line.is_closed:
-        s = np.mod(s, line.length)
-    pts = shapely.get_coordinates(shapely.line_interpolate_point(line, np.clip(s, 0, line.length)))
-    # Past either end of the line, carry on in a straight line.
-    over = np.maximum(np.where(s > line.length, s - line.length, 0), np.where(s < 0, -s, 0))
-    pts = pts + offset + over[:, None] * (sign * tangent / max(np.linalg.norm(tangent), 1e-9))
-    return pts
+    return follow_road(roads.lines, p, v, times, snap_m)
 
 
 def _path(

@@ -63,6 +63,14 @@ class TrackerConfig:
         M of the M-of-N rule: a tentative track is confirmed after this many fixes...
     confirm_window_s : float
         ...within this long after its first fix; otherwise it is dropped (s).
+    confirm_spread_m : float or None
+        ...and once its position is settled: the worst-direction 1-sigma of the state's
+        position (all of it: a particle cloud split between hypotheses is not settled) at
+        most this (m). Points made before it first settled are not reported. None: the
+        plain M-of-N rule. Not used by the raw baselines.
+    confirm_settle_s : float
+        A tentative track with ``confirm_hits`` fixes is confirmed this long after its
+        first fix even if not settled (s): an object only ever seen poorly is reported.
     gap_threshold_s : float
         A span with no associated fix longer than this is reported as a gap (s).
     step_window_s : float
@@ -103,6 +111,15 @@ class TrackerConfig:
     road_motion : bool
         Multi-hypothesis method only: move vehicle particles along the road network when
         one is given.
+    road_leave_rate_per_s : float
+        Road-constrained particles leave the road network at this rate (1/s) into an
+        off-road constant-velocity mode (car parks, yards); 0 with ``road_free_init`` 0:
+        strictly on the roads.
+    road_join_rate_per_s : float
+        Off-road particles within the road's half width rejoin it at this rate (1/s).
+    road_free_init : float
+        Share of a new road track's particles near a road that start off-road (those
+        farther than the road's half width always do).
     reacquire_s : float
         A track that ended (coasted past its class's ``max_coast_s``) stays this long a
         candidate identity for a new track (s; 0 disables): a newly confirmed track whose
@@ -119,6 +136,8 @@ class TrackerConfig:
     gate_probability: float = 0.9999
     confirm_hits: int = 3
     confirm_window_s: float = 1.0
+    confirm_spread_m: float | None = 1.5
+    confirm_settle_s: float = 5.0
     gap_threshold_s: float = 1.0
     step_window_s: float = 0.02
     fuse_sensors: bool = True
@@ -134,6 +153,9 @@ class TrackerConfig:
     smoothing_lag: int = 5
     mode_radius_m: float = 3.0
     road_motion: bool = False
+    road_leave_rate_per_s: float = 0.1
+    road_join_rate_per_s: float = 1.0
+    road_free_init: float = 0.05
     reacquire_s: float = 30.0
     seed: int = 0
 
@@ -166,10 +188,26 @@ class TrackerConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise TrackingError(f"{name} must be a positive number, got {value}")
+        for name in ("road_leave_rate_per_s", "road_join_rate_per_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise TrackingError(f"{name} must be >= 0, got {value}")
+        if not 0.0 <= self.road_free_init <= 1.0:
+            raise TrackingError(f"road_free_init must be in [0, 1], got {self.road_free_init}")
         if not (math.isfinite(self.reacquire_s) and self.reacquire_s >= 0):
             raise TrackingError(f"reacquire_s must be >= 0, got {self.reacquire_s}")
         if not (math.isfinite(self.step_window_s) and self.step_window_s >= 0):
             raise TrackingError(f"step_window_s must be >= 0, got {self.step_window_s}")
+        if self.confirm_spread_m is not None and not (
+            math.isfinite(self.confirm_spread_m) and self.confirm_spread_m > 0
+        ):
+            raise TrackingError(
+                f"confirm_spread_m must be positive or None, got {self.confirm_spread_m}"
+            )
+        if not (
+            math.isfinite(self.confirm_settle_s) and self.confirm_settle_s >= self.confirm_window_s
+        ):
+            raise TrackingError("confirm_settle_s must be finite and >= confirm_window_s")
         if self.road_sigma_m is not None and not self.road_sigma_m > 0:
             raise TrackingError(f"road_sigma_m must be positive or None, got {self.road_sigma_m}")
 

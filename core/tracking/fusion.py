@@ -95,9 +95,10 @@ def triangulate_fixes(fix_a: Fix, fix_b: Fix, config: TrackerConfig) -> Fix | No
     midpoint within ``config.fusion_hit_gate_sigma`` hit sigmas plus 1 m (horizontally)
     of a terrain hit of each ray.
 
-    The result has one hit (the midpoint) whose covariance combines the rays' angular
-    errors (``config.ray_sigma_rad`` times range) across each ray's ground track, plus
-    half the miss distance; its sigma is that covariance's worst direction. Its origin
+    The result has one hit (the midpoint) whose covariance combines, across each ray's
+    ground track, the larger of the ray's angular error (``config.ray_sigma_rad`` times
+    range) and the fix's own across-ray sigma (the object's extent), plus half the miss
+    distance; its sigma is that covariance's worst direction. Its origin
     and direction are ``fix_a``'s, its sensor is
     ``"a+b"`` (sorted names), its time the mean, its detection index ``fix_a``'s. It has
     a road hit (the midpoint) when either input had one.
@@ -126,6 +127,10 @@ def _triangulate(fix_a: Fix, fix_b: Fix, config: TrackerConfig) -> tuple[Fix, fl
     sa = config.ray_sigma_rad * ra.range_a_m
     sb = config.ray_sigma_rad * ra.range_b_m
     worst = math.sqrt(0.5 * (sa * sa + sb * sb)) / sin_angle
+    # across each ray: the ray's angular error or the fix's own across-ray sigma (the
+    # object's extent), whichever is larger
+    sa = max(sa, math.sqrt(_across_var(fix_a, _across(fix_a), ra.p_enu)))
+    sb = max(sb, math.sqrt(_across_var(fix_b, _across(fix_b), ra.p_enu)))
     cov = _triangulation_cov(fix_a, fix_b, sa, sb, worst)
     cov += (max(0.5 * ra.miss_m, 0.05) ** 2) * np.eye(2)
     sigma = math.sqrt(float(np.linalg.eigvalsh(cov)[-1]))
@@ -147,13 +152,36 @@ def _triangulate(fix_a: Fix, fix_b: Fix, config: TrackerConfig) -> tuple[Fix, fl
     return fused, ra.miss_m
 
 
+def _across(fix: Fix) -> np.ndarray:
+    """Unit horizontal normal (2,) of the fix's ray ground track (x for a vertical ray)."""
+    g = fix.direction_enu[:2]
+    norm = float(np.hypot(g[0], g[1]))
+    return np.array([1.0, 0.0]) if norm < 1e-9 else np.array([-g[1], g[0]]) / norm
+
+
+def _across_var(fix: Fix, n: np.ndarray, p_enu: np.ndarray) -> float:
+    """Variance (m^2) across the ray (unit ``n``) of the fix's hit nearest ``p_enu``.
+
+    A hit's covariance holds what pins the *object's centre* across the ray: pixel
+    noise and the footprint's extent (the box's centre column is some point of the
+    object, not its centre). 0 for a fix without hits.
+    """
+    if fix.n_hits == 0:
+        return 0.0
+    j = int(np.argmin(np.sum((fix.hits_enu[:, :2] - p_enu[:2]) ** 2, axis=1)))
+    return float(n @ fix.hit_covariances()[j] @ n)
+
+
 def _triangulation_cov(fix_a: Fix, fix_b: Fix, sa: float, sb: float, worst: float) -> np.ndarray:
     """Horizontal covariance (2, 2) of a two-ray triangulation (m^2).
 
-    Each ray pins the point across its own ground track to ``sigma_ray * range`` and says
-    nothing along it; the information of the two adds. Rays whose ground tracks are
-    (nearly) parallel leave a direction unpinned, so a weak isotropic prior of the
-    worst-direction sigma ``worst`` (m) bounds it.
+    Each ray pins the point across its own ground track to ``sa`` / ``sb`` (m: the larger
+    of the ray's angular error ``sigma_ray * range`` and its fix's own across-ray sigma,
+    which holds the footprint's extent - two cameras see different parts of a car, so
+    the rays meet near, not at, its centre) and says nothing along it; the information
+    of the two adds. Rays whose ground tracks are (nearly) parallel leave a direction
+    unpinned, so a weak isotropic prior of the rays' worst-direction sigma ``worst`` (m,
+    from the angular errors alone) bounds it.
     """
     info = np.eye(2) / (worst * worst)
     for fix, s in ((fix_a, sa), (fix_b, sb)):

@@ -9,14 +9,17 @@ name                   assembly
                        a chi-square gate; one tentative track per hit, best sibling wins
 ``multi-hypothesis``   CONDENSATION particle filter, likelihood a mixture over all hits
                        (with ``config.road_motion`` and roads: vehicles move on roads)
-``multi-hypothesis-road``  the same with road-constrained vehicle motion (needs roads)
-``road``               Kalman filter; vehicles use the road rule's hit, and a fix without
-                       one (and every human fix) updates with the hit mixture (PDA)
+``multi-hypothesis-road``  the same with road-constrained vehicle motion (needs roads),
+                       with an off-road mode (car parks, yards)
+``road``               Kalman filter; vehicles use the road rule's hit (with roads: it and
+                       the two lane centres along the ray, as a mixture), and a fix
+                       without one (and every human fix) updates with the hit mixture
 =====================  =====================================================================
 
 Every method associates by global nearest neighbour with explicit missed detections,
-confirms tracks M-of-N, coasts through short occlusions, and (except the raw baselines)
-triangulates simultaneous fixes from two cameras and smooths its last
+confirms tracks M-of-N once their position has settled (the raw baselines: M-of-N
+only), re-acquires lost vehicles along the roads, coasts through short occlusions,
+and (except the raw baselines) triangulates simultaneous fixes from two cameras and smooths its last
 ``config.smoothing_lag`` points (Rauch-Tung-Striebel for the Kalman filter, particle
 ancestry for the particle filter; the newest point is always the filtered one).
 """
@@ -39,7 +42,8 @@ from .measurement import AllHits, FirstHit, HitMixture, LastHit, RoadHit
 from .motion import ConstantVelocity, ConstantVelocityParticles
 from .particle import ParticleFilter
 from .passthrough import PassThroughFilter
-from .protocols import MeasurementModel
+from .protocols import MeasurementModel, Reacquirer
+from .reacquire import RoadFollowingReacquirer
 from .roads import RoadGraph, RoadParticleMotion
 from .tracker import ClassComponents, Tracker, TrackerComponents
 from .types import CLASSES, Fix, Track
@@ -63,8 +67,21 @@ def _assemble(
     )
 
 
-def _initiator(config: TrackerConfig, per_candidate: bool) -> MOfNInitiator:
-    return MOfNInitiator(config.confirm_hits, config.confirm_window_s, per_candidate)
+def _reacquirer(cls: str, roads: RoadGraph | None) -> Reacquirer | None:
+    """Vehicles near a road are re-acquired along it; the rest by their own prediction."""
+    if roads is None or cls != "vehicle":
+        return None
+    return RoadFollowingReacquirer(roads.lines)
+
+
+def _initiator(config: TrackerConfig, per_candidate: bool, settle: bool = True) -> MOfNInitiator:
+    return MOfNInitiator(
+        config.confirm_hits,
+        config.confirm_window_s,
+        per_candidate,
+        config.confirm_spread_m if settle else None,
+        config.confirm_settle_s,
+    )
 
 
 def _raw(measurement: MeasurementModel) -> Builder:
@@ -74,7 +91,7 @@ def _raw(measurement: MeasurementModel) -> Builder:
             c: ClassComponents(
                 measurement,
                 PassThroughFilter(_kalman_filter(config, c, smooth=False), config.raw_gate_m, g),
-                _initiator(config, per_candidate=True),
+                _initiator(config, per_candidate=True, settle=False),
             )
             for c in CLASSES
         }
@@ -97,7 +114,9 @@ def _kalman_filter(config: TrackerConfig, cls: str, smooth: bool = True) -> Kalm
 def build_kalman(config: TrackerConfig, roads: RoadGraph | None) -> TrackerComponents:
     """Kalman filter on the hit nearest the prediction."""
     per_class = {
-        c: ClassComponents(AllHits(), _kalman_filter(config, c), _initiator(config, True))
+        c: ClassComponents(
+            AllHits(), _kalman_filter(config, c), _initiator(config, True), _reacquirer(c, roads)
+        )
         for c in CLASSES
     }
     return _assemble(config, per_class, fuse=True)
@@ -107,7 +126,14 @@ def _particle_filter(config: TrackerConfig, cls: str, roads: RoadGraph | None) -
     p = config.params(cls)
     motion: ConstantVelocityParticles | RoadParticleMotion
     if roads is not None and cls == "vehicle":
-        motion = RoadParticleMotion(roads, p.q_m2_s3, p.init_speed_sigma_m_s)
+        motion = RoadParticleMotion(
+            roads,
+            p.q_m2_s3,
+            p.init_speed_sigma_m_s,
+            leave_rate_per_s=config.road_leave_rate_per_s,
+            join_rate_per_s=config.road_join_rate_per_s,
+            p_free_init=config.road_free_init,
+        )
     else:
         motion = ConstantVelocityParticles(p.q_m2_s3, p.init_speed_sigma_m_s)
     return ParticleFilter(
@@ -120,12 +146,15 @@ def _particle_filter(config: TrackerConfig, cls: str, roads: RoadGraph | None) -
     )
 
 
-def _multi(config: TrackerConfig, roads: RoadGraph | None) -> TrackerComponents:
+def _multi(
+    config: TrackerConfig, roads: RoadGraph | None, reacquire_roads: RoadGraph | None
+) -> TrackerComponents:
     per_class = {
         c: ClassComponents(
             HitMixture(),
             _particle_filter(config, c, roads),
             _initiator(config, per_candidate=False),
+            _reacquirer(c, reacquire_roads),
         )
         for c in CLASSES
     }
@@ -134,7 +163,7 @@ def _multi(config: TrackerConfig, roads: RoadGraph | None) -> TrackerComponents:
 
 def build_multi_hypothesis(config: TrackerConfig, roads: RoadGraph | None) -> TrackerComponents:
     """Particle filter over all hits; road motion only if ``config.road_motion``."""
-    return _multi(config, roads if config.road_motion else None)
+    return _multi(config, roads if config.road_motion else None, roads)
 
 
 def build_multi_hypothesis_road(
@@ -143,16 +172,17 @@ def build_multi_hypothesis_road(
     """Particle filter over all hits, vehicles constrained to the road network."""
     if roads is None:
         raise TrackingError("method 'multi-hypothesis-road' needs a road network (roads=...)")
-    return _multi(config, roads)
+    return _multi(config, roads, roads)
 
 
 def build_road(config: TrackerConfig, roads: RoadGraph | None) -> TrackerComponents:
     """Kalman filter on the road rule's hit, the hit mixture (PDA) without one."""
     per_class = {
         "vehicle": ClassComponents(
-            RoadHit(config.road_sigma_m),
+            RoadHit(config.road_sigma_m, roads),
             _kalman_filter(config, "vehicle"),
             _initiator(config, True),
+            _reacquirer("vehicle", roads),
         ),
         "human": ClassComponents(
             HitMixture(), _kalman_filter(config, "human"), _initiator(config, True)

@@ -11,8 +11,10 @@ measurement model      :mod:`.measurement` (first / last / all hits, road rule)
 filter                 :mod:`.kalman`, :mod:`.particle`, :mod:`.passthrough`
 hypothesiser           :mod:`.hypothesiser` (chi-square gate, best hit)
 data associator        :mod:`.association` (global nearest neighbour)
-initiator              :mod:`.initiation` (M-of-N, one seed per hit or a mixture)
+initiator              :mod:`.initiation` (M-of-N and settled, one seed per hit or a
+                       mixture)
 deleter                :mod:`.deletion` (coast time)
+reacquirer             :mod:`.reacquire` (own prediction, or along the roads)
 =====================  ===============================================================
 
 A missed detection is an explicit hypothesis (:class:`MissedDetection`), chosen by the
@@ -42,6 +44,7 @@ __all__ = [
     "MissedDetection",
     "MotionModel",
     "ParticleMotionModel",
+    "Reacquirer",
     "SingleHypothesis",
 ]
 
@@ -261,12 +264,23 @@ class Initiator(Protocol):
         """Which candidate(s) each seed starts from (None: all, as a mixture)."""
         ...
 
-    def confirmed(self, n_updates: int, age_s: float) -> bool:
-        """Whether a tentative track with this history is confirmed."""
+    def confirmed(self, n_updates: int, age_s: float, spread: float = 0.0) -> bool:
+        """Whether a tentative track with this history is confirmed.
+
+        ``spread`` is the worst-direction 1-sigma (m) of its state's position after its
+        last update.
+        """
         ...
 
     def expired(self, n_updates: int, age_s: float) -> bool:
         """Whether a tentative track with this history is dropped."""
+        ...
+
+    def reportable(self, spreads: list[float]) -> int:
+        """How many leading points of a newly confirmed track to leave out.
+
+        ``spreads``: the state's position spread (m) after each tentative update.
+        """
         ...
 
 
@@ -275,4 +289,26 @@ class Deleter(Protocol):
 
     def delete(self, cls: str, coast_s: float) -> bool:
         """Whether a track of class ``cls`` unseen for ``coast_s`` seconds ends."""
+        ...
+
+
+class Reacquirer(Protocol):
+    """Scores a lost track's prediction at a new track's position (identity over gaps)."""
+
+    def density(
+        self,
+        flt: Filter,
+        state: Any,
+        last_t_s: float,
+        last_xy: np.ndarray,
+        t_s: float,
+        xy: np.ndarray,
+        cov_xy: np.ndarray,
+        rng: np.random.Generator,
+    ) -> float:
+        """Density (1/m^2) at ``xy`` (2,), known to ``cov_xy``, of the lost track at ``t_s``.
+
+        ``state`` is its (possibly coasted) state; ``last_t_s``, ``last_xy`` (2,) the
+        time and position of its last estimate.
+        """
         ...

@@ -6,7 +6,8 @@ edges. A road particle is ``(edge, s, v, lateral)``: arc length ``s`` along the 
 (m), signed speed ``v`` along it (m/s), and a lateral offset from the centreline (m, left
 positive) so lanes and road width are represented. Particles run along edges and, at a
 junction, continue onto a random other edge (dead ends turn back), so they can only be
-where a vehicle on the network can be. Off-network vehicles are not this model's job.
+where a vehicle on the network can be - unless they take the model's off-road mode
+(car parks, yards), a constant-velocity walk in the plane entered and left at set rates.
 """
 
 from __future__ import annotations
@@ -38,6 +39,8 @@ class RoadGraph:
 
     def __init__(self, lines: Sequence[LineString], junction_tolerance_m: float = 0.5) -> None:
         lines = [shapely.force_2d(line) for line in lines]
+        #: The centrelines as given (2-D), before noding.
+        self.lines: tuple[LineString, ...] = tuple(lines)
         if not lines or any(
             not isinstance(g, LineString) or g.is_empty or g.length <= 0 for g in lines
         ):
@@ -155,31 +158,70 @@ class RoadGraph:
 
 @dataclass(frozen=True, eq=False)
 class RoadParticles:
-    """Particles on a road network (arrays of shape (n,), plus ``xy`` (n, 2))."""
+    """Particles on (or off) a road network.
+
+    Arrays of shape (n,): ``edge``, ``s`` (m), ``v`` (m/s), ``lateral`` (m) describe a
+    particle on the roads; ``free`` marks those off them (car parks, yards, dead ends),
+    which move by constant velocity ``vxy`` (n, 2) (m/s) in the plane instead and whose
+    road fields are stale. ``xy`` (n, 2) is every particle's position (m).
+    """
 
     edge: np.ndarray
     s: np.ndarray
     v: np.ndarray
     lateral: np.ndarray
     xy: np.ndarray
+    free: np.ndarray | None = None
+    vxy: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        n = self.s.shape[0]
+        if self.free is None:
+            object.__setattr__(self, "free", np.zeros(n, dtype=bool))
+        if self.vxy is None:
+            object.__setattr__(self, "vxy", np.zeros((n, 2)))
+
+
+def _cv_noise(q: float, dt_s: float, shape: tuple[int, ...], rng: np.random.Generator):
+    """Exact discrete white-acceleration noise: (position, velocity) draws of ``shape``."""
+    axis = q * np.array([[dt_s**3 / 3.0, dt_s**2 / 2.0], [dt_s**2 / 2.0, dt_s]])
+    noise = rng.standard_normal((*shape, 2)) @ np.linalg.cholesky(axis).T
+    return noise[..., 0], noise[..., 1]
 
 
 @dataclass(frozen=True)
 class RoadParticleMotion:
-    """Road-constrained constant-speed motion for a particle filter.
+    """Road-constrained constant-speed motion with an off-road mode, for a particle filter.
+
+    On the roads a particle runs along an edge (constant speed, white along-road
+    acceleration) with a slowly wandering lateral offset. Vehicles also leave the roads
+    (into a car park, a yard, past a dead end), so the motion is a two-mode mixture: an
+    on-road particle goes off-road at rate ``leave_rate_per_s`` (keeping its velocity),
+    an off-road particle moves by constant velocity in the plane and rejoins the road at
+    rate ``join_rate_per_s`` while it is within ``max_lateral_m`` of one. A new particle
+    farther than ``max_lateral_m`` from every road starts off-road, as does a fraction
+    ``p_free_init`` of the rest. The measurement weights then keep whichever mode
+    explains the fixes. ``leave_rate_per_s = 0`` and ``p_free_init = 0`` give the strict
+    on-road model (particles far from roads are then snapped onto them).
 
     Parameters
     ----------
     network : RoadGraph
         The roads.
     q_m2_s3 : float
-        Along-road acceleration noise spectral density (m^2/s^3).
+        Acceleration noise spectral density (m^2/s^3), along the road and per axis off it.
     init_speed_sigma_m_s : float
-        1-sigma of the initial along-road speed (m/s).
+        1-sigma of the initial speed (m/s) (along the road, or per axis off it).
     max_lateral_m : float
-        Lateral offsets are clipped to this (half the road width, m).
+        Lateral offsets on a road are clipped to this (half the road width, m).
     lateral_walk_m_sqrt_s : float
         Random-walk rate of the lateral offset (lane changes), m/sqrt(s).
+    leave_rate_per_s : float
+        Rate at which an on-road particle leaves the road (1/s).
+    join_rate_per_s : float
+        Rate at which an off-road particle near a road joins it (1/s).
+    p_free_init : float
+        Share of new particles near a road that start off-road.
     """
 
     network: RoadGraph
@@ -187,38 +229,100 @@ class RoadParticleMotion:
     init_speed_sigma_m_s: float
     max_lateral_m: float = 4.0
     lateral_walk_m_sqrt_s: float = 0.3
+    leave_rate_per_s: float = 0.0
+    join_rate_per_s: float = 1.0
+    p_free_init: float = 0.0
+
+    def __post_init__(self) -> None:
+        rates_ok = self.leave_rate_per_s >= 0 and self.join_rate_per_s >= 0
+        if not (rates_ok and 0.0 <= self.p_free_init <= 1.0 and self.max_lateral_m > 0):
+            raise TrackingError(
+                "road motion needs rates >= 0, p_free_init in [0, 1] and max_lateral_m > 0"
+            )
 
     def _build(
-        self, edge: np.ndarray, s: np.ndarray, v: np.ndarray, lateral: np.ndarray
+        self,
+        edge: np.ndarray,
+        s: np.ndarray,
+        v: np.ndarray,
+        lateral: np.ndarray,
+        free: np.ndarray | None = None,
+        vxy: np.ndarray | None = None,
+        free_xy: np.ndarray | None = None,
     ) -> RoadParticles:
         centre, normal = self.network.frame(edge, s)
-        return RoadParticles(edge, s, v, lateral, centre + lateral[:, None] * normal)
+        xy = centre + lateral[:, None] * normal
+        if free is not None and free_xy is not None:
+            xy[free] = free_xy[free]
+        return RoadParticles(edge, s, v, lateral, xy, free, vxy)
 
     def initial(self, cands: Candidates, n: int, rng: np.random.Generator) -> RoadParticles:
-        """Draw samples around the candidates, snapped onto the nearest roads."""
+        """Draw samples around the candidates; those near a road start on it."""
         xy = sample_candidates(cands, n, rng)
         edge, s, lateral = self.network.snap(xy)
+        free = (np.abs(lateral) > self.max_lateral_m) | (rng.random(n) < self.p_free_init)
+        if self.leave_rate_per_s == 0 and self.p_free_init == 0:
+            free[:] = False  # the strict on-road model
         lateral = np.clip(lateral, -self.max_lateral_m, self.max_lateral_m)
         v = self.init_speed_sigma_m_s * rng.standard_normal(n)
-        return self._build(edge, s, v, lateral)
+        vxy = self.init_speed_sigma_m_s * rng.standard_normal((n, 2))
+        return self._build(edge, s, v, lateral, free, vxy, xy)
 
     def propagate(
         self, particles: RoadParticles, dt_s: float, rng: np.random.Generator
     ) -> RoadParticles:
-        """Along-road constant velocity with exact discrete noise, across junctions."""
+        """Move on or off the roads with exact discrete noise, then switch modes."""
         if dt_s <= 0.0:
             return particles
         n = particles.s.shape[0]
-        axis = self.q_m2_s3 * np.array([[dt_s**3 / 3.0, dt_s**2 / 2.0], [dt_s**2 / 2.0, dt_s]])
-        noise = rng.standard_normal((n, 2)) @ np.linalg.cholesky(axis).T
-        s = particles.s + dt_s * particles.v + noise[:, 0]
-        v = particles.v + noise[:, 1]
-        lateral = particles.lateral + self.lateral_walk_m_sqrt_s * np.sqrt(
-            dt_s
-        ) * rng.standard_normal(n)
-        edge, s, v, lateral = self.network.advance(particles.edge, s, v, lateral, rng)
+        free = particles.free.copy()
+        # On the roads: along-road constant velocity, across junctions.
+        ds, dv = _cv_noise(self.q_m2_s3, dt_s, (n,), rng)
+        s = particles.s + dt_s * particles.v + ds
+        v = particles.v + dv
+        walk = self.lateral_walk_m_sqrt_s * np.sqrt(dt_s) * rng.standard_normal(n)
+        lateral = particles.lateral + walk
+        edge = particles.edge.copy()
+        on = ~free
+        if on.any():
+            e, s_on, v_on, lat_on = self.network.advance(edge[on], s[on], v[on], lateral[on], rng)
+            edge[on], s[on], v[on], lateral[on] = e, s_on, v_on, lat_on
         lateral = np.clip(lateral, -self.max_lateral_m, self.max_lateral_m)
-        return self._build(edge, s, v, lateral)
+        # Off the roads: constant velocity in the plane.
+        dp, dvxy = _cv_noise(self.q_m2_s3, dt_s, (n, 2), rng)
+        free_xy = particles.xy + dt_s * particles.vxy + dp
+        vxy = particles.vxy + dvxy
+        out = self._build(edge, s, v, lateral, free, vxy, free_xy)
+        return self._switch(out, dt_s, rng)
+
+    def _switch(self, p: RoadParticles, dt_s: float, rng: np.random.Generator) -> RoadParticles:
+        """Leave or join the roads at the configured rates."""
+        free = p.free.copy()
+        vxy = p.vxy.copy()
+        edge, s, v, lateral = p.edge.copy(), p.s.copy(), p.v.copy(), p.lateral.copy()
+        xy = p.xy.copy()
+        n = free.shape[0]
+        u = rng.random(n)
+        leave = ~free & (u < -np.expm1(-self.leave_rate_per_s * dt_s))
+        if leave.any():
+            _, normal = self.network.frame(edge[leave], s[leave])
+            tangent = np.stack([normal[:, 1], -normal[:, 0]], axis=1)
+            vxy[leave] = v[leave, None] * tangent
+            free[leave] = True
+        join = free & ~leave & (u < -np.expm1(-self.join_rate_per_s * dt_s))
+        if join.any():
+            e, sj, lat = self.network.snap(xy[join])
+            near = np.abs(lat) <= self.max_lateral_m
+            idx = np.flatnonzero(join)[near]
+            if idx.size:
+                e, sj, lat = e[near], sj[near], lat[near]
+                _, normal = self.network.frame(e, sj)
+                tangent = np.stack([normal[:, 1], -normal[:, 0]], axis=1)
+                edge[idx], s[idx], lateral[idx] = e, sj, lat
+                v[idx] = np.sum(vxy[idx] * tangent, axis=1)
+                free[idx] = False
+                # position unchanged: it was already within the road's width
+        return RoadParticles(edge, s, v, lateral, xy, free, vxy)
 
     def positions(self, particles: RoadParticles) -> np.ndarray:
         """Horizontal positions, shape (n, 2)."""
@@ -232,4 +336,6 @@ class RoadParticleMotion:
             particles.v[index],
             particles.lateral[index],
             particles.xy[index],
+            particles.free[index],
+            particles.vxy[index],
         )

@@ -31,6 +31,7 @@ import numpy as np
 from ..errors import TrackingError
 from .config import TrackerConfig
 from .fusion import fuse_measurements
+from .initiation import spread_m
 from .protocols import (
     Candidates,
     DataAssociator,
@@ -40,8 +41,10 @@ from .protocols import (
     Initiator,
     Measurement,
     MeasurementModel,
+    Reacquirer,
     SingleHypothesis,
 )
+from .reacquire import MotionReacquirer
 from .types import Fix, Track, TrackPoint
 
 __all__ = ["ClassComponents", "Tracker", "TrackerComponents", "find_gaps"]
@@ -59,11 +62,15 @@ class ClassComponents:
         Predictor/updater (its motion model carries the class's parameters).
     initiator : Initiator
         Seeds and confirms tentative tracks.
+    reacquirer : Reacquirer or None
+        Scores a lost track's prediction at a new track's position (identity over long
+        absences); None: the filter's own prediction (:class:`MotionReacquirer`).
     """
 
     measurement: MeasurementModel
     filter: Filter
     initiator: Initiator
+    reacquirer: Reacquirer | None = None
 
 
 @dataclass(frozen=True)
@@ -108,6 +115,8 @@ class _Record:
     #: Candidates behind the points that may still be revised (all while tentative, the
     #: last ``smoothing_lag + 1`` once confirmed).
     cands: list[Candidates] = field(default_factory=list)
+    #: While tentative: the state's position spread (m) after each update, oldest first.
+    spreads: list[float] = field(default_factory=list)
 
 
 def _best(hyps: Sequence[SingleHypothesis | None]) -> SingleHypothesis | None:
@@ -288,7 +297,9 @@ class Tracker:
         p, cov = flt.estimate(rec.state)
         rec.points.append(TrackPoint(t, p, m.sensors, m.indices, cov))
         rec.cands.append(cands)
-        if rec.track_id is not None:
+        if rec.track_id is None:
+            rec.spreads.append(spread_m(flt.gaussian(rec.state)[1]))
+        else:
             lag = self.config.smoothing_lag
             self._revise(rec, min(lag + 1, len(rec.cands)))
             del rec.cands[: -(lag + 1)]
@@ -357,6 +368,7 @@ class Tracker:
             p, cov = parts.filter.estimate(state)
             rec.points.append(TrackPoint(t, p, m.sensors, m.indices, cov))
             rec.cands.append(cands)
+            rec.spreads.append(spread_m(parts.filter.gaussian(state)[1]))
             rec.n_updates = 1
             self._live.append(rec)
 
@@ -378,9 +390,17 @@ class Tracker:
     def _confirm(self, rec: _Record, t: float) -> None:
         """Give ``rec`` an id and let its filter revise the points made while tentative.
 
-        The id is that of an earlier track when :meth:`_predecessor` finds one (the same
-        object, back after an absence); otherwise a new one.
+        Points made before the state first settled are left out
+        (:meth:`Initiator.reportable`). The id is that of an earlier track when
+        :meth:`_predecessor` finds one (the same object, back after an absence); otherwise
+        a new one.
         """
+        skip = self.components.per_class[rec.cls].initiator.reportable(rec.spreads)
+        skip = min(skip, len(rec.points) - 1)
+        if skip > 0:
+            del rec.points[:skip]
+            del rec.cands[:skip]
+        rec.spreads = []
         self._revise(rec, len(rec.points))
         del rec.cands[: -(self.config.smoothing_lag + 1)]
         old = self._predecessor(rec, t)
@@ -408,10 +428,11 @@ class Tracker:
         window = self.config.reacquire_s
         if window <= 0:
             return None
-        flt = self.components.per_class[rec.cls].filter
-        density = getattr(flt, "density", None)
-        if density is None:
+        parts = self.components.per_class[rec.cls]
+        flt = parts.filter
+        if getattr(flt, "density", None) is None:
             return None
+        reacquirer = parts.reacquirer or MotionReacquirer()
         xy, cov = flt.gaussian(rec.state)
         pool = [r for r in self._live if r.track_id is not None] + [
             r for r in self._ended if t - r.t_update <= window
@@ -421,8 +442,10 @@ class Tracker:
             if old.cls != rec.cls or old.t_update >= rec.t_created:
                 continue
             # a private generator: looking must not change the tracker's random stream
-            pred = flt.predict(old.state, t, np.random.default_rng(old.uid))
-            d = float(density(pred, xy, cov))
+            last = old.points[-1]
+            d = reacquirer.density(
+                flt, old.state, last.t_s, last.p_enu[:2], t, xy, cov, np.random.default_rng(old.uid)
+            )
             if d > best_density:
                 best, best_density = old, d
         return best
@@ -433,7 +456,8 @@ class Tracker:
         for rec in self._live:
             if rec.track_id is not None:
                 continue
-            if per_class[rec.cls].initiator.confirmed(rec.n_updates, t - rec.t_created):
+            spread = rec.spreads[-1] if rec.spreads else 0.0
+            if per_class[rec.cls].initiator.confirmed(rec.n_updates, t - rec.t_created, spread):
                 best = winners.get(rec.group)
                 key = (-rec.n_updates, rec.nis_sum / max(rec.n_updates - 1, 1), rec.uid)
                 if best is None or key < (

@@ -74,7 +74,7 @@ def test_evaluate_prints_a_row_per_method_and_plots(capsys, sample_site_dir, tmp
     [
         (["track", "--detections", "nope.jsonl", "-o", "t.geojson"], "nope.jsonl: No such file"),
         (["track", "--detections", "d.txt", "-o", "t.geojson"], "unknown detection file type"),
-        (["track", "--detections", "d.jsonl", "-o", "t.kml"], "unknown track file type"),
+        (["track", "--detections", "d.jsonl", "-o", "t.shp"], "unknown track file type"),
         (["scenario", "--name", "vehicle-run", "-o", "d.txt"], "unknown detection file type"),
         (["scenario", "--name", "vehicle-run", "-o", "d.jsonl", "--p-miss", "2"], "p_miss"),
         (["evaluate", "--scenario", "pedestrians", "--methods", "psychic"], "unknown method"),
@@ -109,11 +109,20 @@ def test_track_skips_bad_records_with_counts(capsys, sample_site_dir, tmp_path):
 
 
 def test_vehicle_run_accuracy(sample_site_dir):
-    """The default vehicle run: the best method is accurate, raw-first jumps into trees."""
+    """The default vehicle run: the issue's bars for the best method; raw-first jumps.
+
+    Best method ``kalman``: RMSE under 1 m, no point more than 3 m off the true path (no
+    jump into the trees, none at the start when one far camera sees the car along its
+    rays), and one identity from start to end (across the hand-offs and the 11 s
+    occlusion on the north bend).
+    """
     site = load_site(sample_site_dir)
     sc = make_scenario(site, "vehicle-run")
     fixes, _ = build_fixes(site, sc.detections)
     raw = evaluate(run_tracker(fixes, "raw-first"), sc.truths)
-    best = evaluate(run_tracker(fixes, "multi-hypothesis", roads=site.roads), sc.truths)
+    best = evaluate(run_tracker(fixes, "kalman", roads=site.roads), sc.truths)
     assert best.rmse_m < 1.0
-    assert raw.n_jumps > 5 * best.n_jumps and raw.rmse_m > 3 * best.rmse_m
+    assert best.n_jumps == 0
+    assert best.id_switches == 0 and best.fragmentation == 0
+    assert best.coverage > 0.85
+    assert raw.n_jumps > 100 and raw.rmse_m > 3 * best.rmse_m

@@ -77,19 +77,26 @@ def test_triangulated_fix_checks_geometry_and_terrain():
         / np.linalg.norm(p - b.origin_enu)
     )
     worst = cfg.ray_sigma_rad * np.linalg.norm(p - a.origin_enu) / math.sin(angle)
-    # covariance: each ray pins the point across its ground track to ray_sigma * range
-    # (3-D range: the ray's angular error), plus a weak isotropic prior of the old
+    # covariance: each ray pins the point across its ground track to the larger of
+    # ray_sigma * range (3-D range: the ray's angular error) and its fix's own across-ray
+    # sigma (0.5 m here: the object's extent), plus a weak isotropic prior of the old
     # worst-direction sigma and the 5 cm floor
     info = np.eye(2) / worst**2
     for f in (a, b):
         g = (p - f.origin_enu)[:2]
         n = np.array([-g[1], g[0]]) / np.linalg.norm(g)
-        s = cfg.ray_sigma_rad * np.linalg.norm(p - f.origin_enu)
+        s = max(cfg.ray_sigma_rad * np.linalg.norm(p - f.origin_enu), 0.5)
         info += np.outer(n, n) / s**2
     expect = np.linalg.inv(info) + 0.05**2 * np.eye(2)
     np.testing.assert_allclose(tri.hit_cov_en_m2[0], expect, rtol=1e-6)
     assert tri.hit_sigma_m[0] == pytest.approx(math.sqrt(np.linalg.eigvalsh(expect)[-1]))
-    assert tri.hit_sigma_m[0] < worst
+    # the object's extent (the fixes' 0.5 m) widens it; a point-like object's does not
+    tiny = triangulate_fixes(
+        _ray_fix([-40, 0, 30], p, "west", sigma=0.01),
+        _ray_fix([40, 0, 30], p, "east", sigma=0.01),
+        cfg,
+    )
+    assert np.all(np.linalg.eigvalsh(tri.hit_cov_en_m2[0] - tiny.hit_cov_en_m2[0]) > 0)
     # same sensor, other class, near-parallel rays, rays that miss, off-terrain crossing
     assert triangulate_fixes(a, _ray_fix([40, 0, 30], p, "west"), cfg) is None
     assert triangulate_fixes(a, _ray_fix([40, 0, 30], p, "east", cls="human"), cfg) is None
