@@ -1,4 +1,4 @@
-"""Detections -> fixes: geolocate each box's foot on the site's terrain, batched per sensor.
+"""Detections -> fixes: geolocate each box's foot on the site's terrain, in one batch.
 
 The geolocation point of a detection is the bottom-centre of its box,
 ``u = (u_min + u_max) / 2, v = v_max`` (Collins et al. 1998). Its viewing ray is cast
@@ -184,43 +184,66 @@ def build_fixes(
     by_sensor, counts = _check(detections, site, edge_tolerance_px)
     geo = site.geolocator(pixel_sigma_px=pixel_sigma_px)
     extent_var = footprint_variances()
-    made: dict[int, Fix] = {}
-    n_multi = 0
+    views = []
+    order: list[int] = []
     for sid, idx in by_sensor.items():
         camera = site.sensors[sid].camera
         w, h = camera.intrinsics.width, camera.intrinsics.height
-        boxes = np.array([detections[i].bbox for i in idx], dtype=np.float64)
+        boxes = np.array([detections[i].bbox for i in idx], dtype=np.float64).reshape(-1, 4)
         # The foot pixel, held on the image (a box may touch the border within tolerance).
         u = np.clip(0.5 * (boxes[:, 0] + boxes[:, 2]), -0.5, w - 0.5)
         v = np.clip(boxes[:, 3], -0.5, h - 0.5)
-        for i, g in zip(idx, geo.geolocate(camera, u, v, rule="all"), strict=True):
-            d = detections[i]
-            if not g.hits:
-                counts["no_hit"] += 1
-                continue
-            n_multi += len(g.hits) > 1
-            ground = np.array([g.direction_enu[0], g.direction_enu[1], 0.0])
-            norm = float(np.linalg.norm(ground))
-            shift = ground * (offsets.get(d.cls, 0.0) / norm) if norm > 1e-9 else np.zeros(3)
-            cov = np.array([hit.cov_en_m2 for hit in g.hits], dtype=np.float64)
-            var_along, var_across = extent_var.get(d.cls, (0.0, 0.0))
-            cov = cov + var_across * np.eye(2)[None]
-            if norm > 1e-9:  # the centre's unknown distance behind the foot, along the ray
-                along = ground[:2] / norm
-                cov = cov + (var_along - var_across) * np.outer(along, along)[None]
-            sigma = np.sqrt(np.linalg.eigvalsh(cov)[:, -1])
-            made[i] = Fix(
-                t_s=d.t_s,
-                sensor=sid,
-                cls=d.cls,
-                detection_index=i,
-                origin_enu=g.origin_enu + shift,
-                direction_enu=g.direction_enu,
-                hits_enu=np.array([hit.p_enu for hit in g.hits]) + shift,
-                hit_sigma_m=sigma,
-                road_hit_enu=None if g.road is None else g.road.p_enu + shift,
-                score=d.score,
-                hit_cov_en_m2=cov,
-            )
+        views.append((camera, u, v))
+        order += idx
+    # One batch for every sensor: one ray cast, vectorised uncertainty and road rule.
+    batch = geo.locate_pixels(views)
+    n_hits = batch.counts
+    counts["no_hit"] += int(np.count_nonzero(n_hits == 0))
+    n_multi = int(np.count_nonzero(n_hits > 1))
+    cls = [detections[i].cls for i in order]
+    offset = np.array([offsets.get(c, 0.0) for c in cls], dtype=np.float64)
+    var_along, var_across = (
+        np.array([extent_var.get(c, (0.0, 0.0))[k] for c in cls], dtype=np.float64) for k in (0, 1)
+    )
+    d = batch.directions_enu
+    ground = np.column_stack([d[:, 0], d[:, 1], np.zeros(len(d))])
+    norm = np.linalg.norm(ground, axis=1)
+    tilted = norm > 1e-9
+    shift = np.zeros_like(ground)
+    shift[tilted] = ground[tilted] * (offset[tilted] / norm[tilted])[:, None]
+    ray = np.repeat(np.arange(len(d)), n_hits)
+    cov = batch.cov_en_m2 + var_across[ray][:, None, None] * np.eye(2)[None]
+    # The centre's unknown distance behind the foot, along the ray's ground track.
+    along = np.zeros((len(d), 2))
+    along[tilted] = ground[tilted, :2] / norm[tilted][:, None]
+    bent = tilted[ray]
+    a = along[ray[bent]]
+    cov[bent] += (var_along - var_across)[ray[bent]][:, None, None] * (
+        a[:, :, None] * a[:, None, :]
+    )
+    sigma = np.sqrt(np.linalg.eigvalsh(cov)[:, -1]) if len(cov) else np.zeros(0)
+    hits_enu = batch.points_enu + shift[ray]
+    origin_enu = batch.origins_enu + shift
+    road_enu = batch.road_enu + shift
+    has_road = batch.has_road
+    made: dict[int, Fix] = {}
+    for r, i in enumerate(order):
+        lo, hi = int(batch.offsets[r]), int(batch.offsets[r + 1])
+        if lo == hi:
+            continue
+        det = detections[i]
+        made[i] = Fix(
+            t_s=det.t_s,
+            sensor=det.sensor,
+            cls=det.cls,
+            detection_index=i,
+            origin_enu=origin_enu[r],
+            direction_enu=d[r],
+            hits_enu=hits_enu[lo:hi],
+            hit_sigma_m=sigma[lo:hi],
+            road_hit_enu=road_enu[r] if has_road[r] else None,
+            score=det.score,
+            hit_cov_en_m2=cov[lo:hi],
+        )
     fixes = [made[i] for i in sorted(made)]
     return fixes, FixReport(len(detections), len(fixes), counts, n_multi)

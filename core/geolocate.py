@@ -20,8 +20,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
+import numba
 import numpy as np
 
 from .camera import distortion_jacobian
@@ -29,9 +30,17 @@ from .dem import Dem
 from .errors import CameraError
 from .raycast import RayStatus, cast_rays
 from .roads import RoadNetwork
-from .uncertainty import hit_covariance
+from .uncertainty import hit_covariances
 
-__all__ = ["RULES", "GroundHit", "Geolocation", "Geolocator", "Rule"]
+__all__ = [
+    "RULES",
+    "SERIAL_CAST_MAX_RAYS",
+    "GroundHit",
+    "Geolocation",
+    "Geolocator",
+    "HitBatch",
+    "Rule",
+]
 
 Rule = Literal["first", "last", "all", "road"]
 RULES: tuple[str, ...] = ("first", "last", "all", "road")
@@ -123,8 +132,66 @@ class Geolocation:
         return self.selected[0] if self.selected else None
 
 
+@dataclass(frozen=True, eq=False)
+class HitBatch:
+    """Terrain crossings and road-rule points of a batch of rays, in CSR layout.
+
+    Attributes
+    ----------
+    origins_enu, directions_enu : ndarray, shape (n, 3)
+        The rays (site frame, m; unit directions).
+    status : ndarray, int8, shape (n,)
+        :class:`~demtrack.core.raycast.RayStatus` per ray.
+    crossed_nodata : ndarray, bool, shape (n,)
+        The ray passed over a DEM hole, so a crossing may be missing.
+    offsets : ndarray, int64, shape (n + 1,)
+        Hits of ray ``i`` are rows ``offsets[i]:offsets[i+1]`` of the per-hit arrays.
+    points_enu : ndarray, shape (m, 3)
+        Every terrain crossing, nearest first per ray (site frame, m).
+    range_m, sigma_m : ndarray, shape (m,)
+        Range along the ray (m) and 1-sigma worst-direction horizontal error (m).
+    cov_en_m2 : ndarray, shape (m, 2, 2)
+        Horizontal (east, north) covariance (m^2).
+    road_enu : ndarray, shape (n, 3)
+        The road rule's point per ray; NaN rows where none.
+    road_range_m, road_sigma_m : ndarray, shape (n,)
+        Its range (m) and sigma (m); NaN where none.
+    road_cov_en_m2 : ndarray, shape (n, 2, 2)
+        Its covariance (m^2); NaN where none.
+    """
+
+    origins_enu: np.ndarray
+    directions_enu: np.ndarray
+    status: np.ndarray
+    crossed_nodata: np.ndarray
+    offsets: np.ndarray
+    points_enu: np.ndarray
+    range_m: np.ndarray
+    sigma_m: np.ndarray
+    cov_en_m2: np.ndarray
+    road_enu: np.ndarray
+    road_range_m: np.ndarray
+    road_sigma_m: np.ndarray
+    road_cov_en_m2: np.ndarray
+
+    @property
+    def n_rays(self) -> int:
+        """Number of rays ``n``."""
+        return int(len(self.status))
+
+    @property
+    def counts(self) -> np.ndarray:
+        """Number of terrain hits per ray, int64 shape (n,)."""
+        return np.diff(self.offsets)
+
+    @property
+    def has_road(self) -> np.ndarray:
+        """Boolean mask of rays with a road-rule point, shape (n,)."""
+        return np.isfinite(self.road_range_m)
+
+
 class Geolocator:
-    """Geolocates pixels of one camera against a DEM.
+    """Geolocates pixels of cameras against a DEM, one camera or a batch of them at once.
 
     Parameters
     ----------
@@ -185,54 +252,210 @@ class Geolocator:
         CameraError
             If a pixel lies outside the image or the rule is unknown.
         """
+        return self.geolocate_many([(camera, u, v)], rule)[0]
+
+    def geolocate_many(
+        self, views: Sequence[tuple[Any, Any, Any]], rule: str = "first"
+    ) -> list[list[Geolocation]]:
+        """Geolocate pixels of several cameras in one batch.
+
+        Parameters
+        ----------
+        views : sequence of (camera, u, v)
+            Each camera with its pixel columns and rows (array_like, same length).
+        rule : str
+            One of :data:`RULES`.
+
+        Returns
+        -------
+        list of list of Geolocation
+            One list per view, one :class:`Geolocation` per pixel, in order; the same
+            answers as :meth:`geolocate` per camera.
+
+        Raises
+        ------
+        CameraError
+            If a pixel lies outside its image or the rule is unknown.
+        """
         if rule not in RULES:
             raise CameraError(f"unknown rule {rule!r}; choose one of {', '.join(RULES)}")
-        u_arr = np.atleast_1d(np.asarray(u, dtype=np.float64))
-        v_arr = np.atleast_1d(np.asarray(v, dtype=np.float64))
-        if u_arr.shape != v_arr.shape:
-            raise CameraError("u and v must have the same length")
-        intr = camera.intrinsics
-        bad = ~intr.in_image(u_arr, v_arr)
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            raise CameraError(
-                f"pixel ({u_arr[i]:g}, {v_arr[i]:g}) is outside the {intr.width}x{intr.height}"
-                " image"
-            )
-        origins, dirs = camera.pixel_to_ray(u_arr, v_arr)
-        result = cast_rays(self.dem, origins, dirs, self.max_range_m, mode="all")
-        axes, sig = _pixel_perturbations(camera, u_arr, v_arr, self.pixel_sigma_px)
-        roads = self.roads
-        out = []
-        for i in range(len(u_arr)):
-            lo, hi = int(result.offsets[i]), int(result.offsets[i + 1])
-            hits = self._ground_hits(
-                result.points[lo:hi], result.range_m[lo:hi], dirs[i], axes[i], sig[i]
-            )
-            road = (
-                self._road_hit(roads, origins[i], dirs[i], axes[i], sig[i])
-                if roads is not None and len(roads)
-                else None
-            )
-            status = RayStatus(int(result.status[i])).name.lower()
-            selected = self._select(hits, road, rule)
-            if rule == "road" and road is None:
-                status = "no_road"
-            out.append(
-                Geolocation(
-                    float(u_arr[i]),
-                    float(v_arr[i]),
-                    origins[i],
-                    dirs[i],
-                    status,
-                    hits,
-                    road,
-                    rule,
-                    selected,
-                    bool(result.crossed_nodata[i]),
+        pixels = [_pixels(camera, u, v) for camera, u, v in views]
+        cameras = [view[0] for view in views]
+        batch = self.locate_pixels(
+            [(cam, u, v) for cam, (u, v) in zip(cameras, pixels, strict=True)]
+        )
+        hits, roads = self._ground_hit_objects(batch)
+        out: list[list[Geolocation]] = []
+        i = 0
+        for u_arr, v_arr in pixels:
+            locs = []
+            for k in range(len(u_arr)):
+                lo, hi = int(batch.offsets[i]), int(batch.offsets[i + 1])
+                ray_hits = tuple(hits[lo:hi])
+                road = roads[i]
+                status = RayStatus(int(batch.status[i])).name.lower()
+                if rule == "road" and road is None:
+                    status = "no_road"
+                locs.append(
+                    Geolocation(
+                        float(u_arr[k]),
+                        float(v_arr[k]),
+                        batch.origins_enu[i],
+                        batch.directions_enu[i],
+                        status,
+                        ray_hits,
+                        road,
+                        rule,
+                        self._select(ray_hits, road, rule),
+                        bool(batch.crossed_nodata[i]),
+                    )
                 )
-            )
+                i += 1
+            out.append(locs)
         return out
+
+    def locate_pixels(self, views: Sequence[tuple[Any, Any, Any]]) -> HitBatch:
+        """Every terrain crossing and road-rule point of many cameras' pixels, as arrays.
+
+        The bulk form of :meth:`geolocate` (no rule, no geodetic output): one ray cast
+        for all pixels of all cameras, vectorised uncertainty and road rule.
+
+        Parameters
+        ----------
+        views : sequence of (camera, u, v)
+            Each camera with its pixel columns and rows; rays are numbered in this order.
+
+        Returns
+        -------
+        HitBatch
+
+        Raises
+        ------
+        CameraError
+            If a pixel lies outside its image.
+        """
+        rays = []
+        for camera, u, v in views:
+            u_arr, v_arr = _pixels(camera, u, v)
+            origins, dirs = camera.pixel_to_ray(u_arr, v_arr)
+            axes, sig = _pixel_perturbations(camera, u_arr, v_arr, self.pixel_sigma_px)
+            rays.append((origins, dirs, axes, sig))
+        if not rays:
+            rays.append((np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 2, 3)), np.zeros((0, 2))))
+        return self.locate_rays(*(np.concatenate(parts) for parts in zip(*rays, strict=True)))
+
+    def locate_rays(
+        self,
+        origins_enu: np.ndarray,
+        directions_enu: np.ndarray,
+        perturb_axes_enu: np.ndarray,
+        perturb_sigmas_rad: np.ndarray,
+    ) -> HitBatch:
+        """Terrain crossings and road-rule points of a batch of rays, as arrays.
+
+        Parameters
+        ----------
+        origins_enu, directions_enu : ndarray, shape (n, 3)
+            The rays, site frame (m); unit directions.
+        perturb_axes_enu : ndarray, shape (n, 2, 3)
+            Per ray, the unit directions in which it tips as its pixel moves.
+        perturb_sigmas_rad : ndarray, shape (n, 2)
+            Per ray, the 1-sigma pointing error along those directions (rad).
+
+        Returns
+        -------
+        HitBatch
+        """
+        o = np.asarray(origins_enu, dtype=np.float64).reshape(-1, 3)
+        d = np.asarray(directions_enu, dtype=np.float64).reshape(-1, 3)
+        axes = np.asarray(perturb_axes_enu, dtype=np.float64).reshape(len(o), 2, 3)
+        sig = np.asarray(perturb_sigmas_rad, dtype=np.float64).reshape(len(o), 2)
+        n = len(o)
+        result = _cast(self.dem, o, d, self.max_range_m)
+        counts = np.diff(result.offsets)
+        ray_of_hit = np.repeat(np.arange(n), counts)
+        roads = self.roads
+        if roads is not None and len(roads):
+            choice = roads.best_candidates(o, d, self.dem, self.road_cutoff_m, self.road_max_gap_m)
+            road_rays = np.flatnonzero(choice.found)
+            road_p = choice.p_enu[road_rays]
+            road_rng = np.linalg.norm(road_p - o[road_rays], axis=1)
+        else:
+            road_rays = np.zeros(0, np.int64)
+            road_p = np.zeros((0, 3))
+            road_rng = np.zeros(0)
+        # Terrain hits and road points take one pass: every step is per point.
+        ray_all = np.concatenate([ray_of_hit, road_rays])
+        p_all = np.concatenate([result.points, road_p])
+        rng_all = np.concatenate([result.range_m, road_rng])
+        x, y = p_all[:, 0], p_all[:, 1]
+        gx, gy = self.dem.gradient(x, y)
+        grad = np.column_stack([np.nan_to_num(gx), np.nan_to_num(gy)])
+        var_z = np.nan_to_num(self.dem.sample_variance(x, y), nan=0.0)
+        cov = hit_covariances(
+            d[ray_all], rng_all, grad, axes[ray_all], sig[ray_all], np.sqrt(np.maximum(var_z, 0))
+        )
+        sigma = np.sqrt(np.linalg.eigvalsh(cov)[:, -1]) if len(cov) else np.zeros(0)
+        m = len(result.range_m)
+        road_enu = np.full((n, 3), np.nan)
+        road_range = np.full(n, np.nan)
+        road_sigma = np.full(n, np.nan)
+        road_cov = np.full((n, 2, 2), np.nan)
+        road_enu[road_rays] = road_p
+        road_range[road_rays] = road_rng
+        road_sigma[road_rays] = sigma[m:]
+        road_cov[road_rays] = cov[m:]
+        return HitBatch(
+            origins_enu=o,
+            directions_enu=d,
+            status=np.asarray(result.status),
+            crossed_nodata=np.asarray(result.crossed_nodata),
+            offsets=np.asarray(result.offsets),
+            points_enu=np.asarray(result.points),
+            range_m=np.asarray(result.range_m),
+            sigma_m=sigma[:m],
+            cov_en_m2=cov[:m],
+            road_enu=road_enu,
+            road_range_m=road_range,
+            road_sigma_m=road_sigma,
+            road_cov_en_m2=road_cov,
+        )
+
+    def _ground_hit_objects(
+        self, batch: HitBatch
+    ) -> tuple[list[GroundHit], list[GroundHit | None]]:
+        """GroundHit values of a batch: every terrain hit, and each ray's road point."""
+        has_road = batch.has_road
+        road_rays = np.flatnonzero(has_road)
+        pts = np.concatenate([batch.points_enu, batch.road_enu[road_rays]])
+        if len(pts):
+            lat, lon, h = (
+                np.atleast_1d(a).tolist()
+                for a in self.frame.to_geodetic(pts[:, 0], pts[:, 1], pts[:, 2])
+            )
+        else:
+            lat = lon = h = []
+        rng = batch.range_m.tolist() + batch.road_range_m[road_rays].tolist()
+        sigma = batch.sigma_m.tolist() + batch.road_sigma_m[road_rays].tolist()
+        cov = list(batch.cov_en_m2) + list(batch.road_cov_en_m2[road_rays])
+        m = len(batch.range_m)
+        made = [
+            GroundHit(
+                pts[k].copy(),
+                lat[k],
+                lon[k],
+                h[k],
+                rng[k],
+                sigma[k],
+                cov[k],
+                "terrain" if k < m else "road",
+            )
+            for k in range(len(pts))
+        ]
+        roads: list[GroundHit | None] = [None] * len(has_road)
+        for j, r in enumerate(road_rays.tolist()):
+            roads[r] = made[m + j]
+        return made[:m], roads
 
     @staticmethod
     def _select(
@@ -246,57 +469,39 @@ class Geolocator:
             return ()
         return (hits[0],) if rule == "first" else (hits[-1],)
 
-    def _ground_hits(
-        self,
-        points: np.ndarray,
-        ranges: np.ndarray,
-        direction: np.ndarray,
-        axes: np.ndarray,
-        sig: np.ndarray,
-        source: str = "terrain",
-    ) -> tuple[GroundHit, ...]:
-        if len(points) == 0:
-            return ()
-        x, y = points[:, 0], points[:, 1]
-        gx, gy = self.dem.gradient(x, y)
-        grad = np.column_stack([np.nan_to_num(gx), np.nan_to_num(gy)])
-        var_z = np.nan_to_num(self.dem.sample_variance(x, y), nan=0.0)
-        cov = hit_covariance(direction, ranges, grad, axes, sig, np.sqrt(np.maximum(var_z, 0)))
-        sigma = np.sqrt(np.linalg.eigvalsh(cov)[:, -1])
-        lat, lon, h = self.frame.to_geodetic(points[:, 0], points[:, 1], points[:, 2])
-        lat, lon, h = (np.atleast_1d(a) for a in (lat, lon, h))
-        return tuple(
-            GroundHit(
-                points[k].copy(),
-                float(lat[k]),
-                float(lon[k]),
-                float(h[k]),
-                float(ranges[k]),
-                float(sigma[k]),
-                cov[k],
-                source,
-            )
-            for k in range(len(points))
-        )
 
-    def _road_hit(
-        self,
-        roads: RoadNetwork,
-        origin: np.ndarray,
-        direction: np.ndarray,
-        axes: np.ndarray,
-        sig: np.ndarray,
-    ) -> GroundHit | None:
-        cand = roads.best_candidate(
-            origin, direction, self.dem, self.road_cutoff_m, self.road_max_gap_m
+#: Batches up to this many rays are cast on the calling thread: waking the kernels' thread
+#: pool costs more than it saves on a few thousand rays (milliseconds per launch on a busy
+#: machine against well under a millisecond of work).
+SERIAL_CAST_MAX_RAYS = 20_000
+
+
+def _cast(dem: Dem, origins: np.ndarray, directions: np.ndarray, max_range_m: float):
+    """``cast_rays(mode="all")``, serial for small batches (numba's setting is per thread)."""
+    if len(origins) > SERIAL_CAST_MAX_RAYS:
+        return cast_rays(dem, origins, directions, max_range_m, mode="all")
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        return cast_rays(dem, origins, directions, max_range_m, mode="all")
+    finally:
+        numba.set_num_threads(threads)
+
+
+def _pixels(camera, u: Any, v: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Validated pixel arrays of ``camera``: same length, inside the image."""
+    u_arr = np.atleast_1d(np.asarray(u, dtype=np.float64))
+    v_arr = np.atleast_1d(np.asarray(v, dtype=np.float64))
+    if u_arr.shape != v_arr.shape:
+        raise CameraError("u and v must have the same length")
+    intr = camera.intrinsics
+    bad = ~intr.in_image(u_arr, v_arr)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise CameraError(
+            f"pixel ({u_arr[i]:g}, {v_arr[i]:g}) is outside the {intr.width}x{intr.height} image"
         )
-        if cand is None:
-            return None
-        rng = float(np.linalg.norm(cand.p_enu - origin))
-        hits = self._ground_hits(
-            cand.p_enu[None, :], np.array([rng]), direction, axes, sig, source="road"
-        )
-        return hits[0]
+    return u_arr, v_arr
 
 
 def _pixel_perturbations(

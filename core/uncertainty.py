@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["hit_covariance"]
+__all__ = ["hit_covariance", "hit_covariances"]
 
 
 def hit_covariance(
@@ -66,5 +66,56 @@ def hit_covariance(
     ):
         dlam = -lam * sig * (e[2] - g @ e[:2]) / fprime
         disp = lam[:, None] * sig * e[None, :2] + dlam[:, None] * d[None, :2]
+        cov += disp[:, :, None] * disp[:, None, :]
+    return cov
+
+
+def hit_covariances(
+    direction_enu: np.ndarray,
+    range_m: np.ndarray,
+    gradient: np.ndarray,
+    perturb_axes_enu: np.ndarray,
+    perturb_sigmas_rad: np.ndarray,
+    sigma_z_m: np.ndarray,
+) -> np.ndarray:
+    """Horizontal 2x2 covariances (m^2) of hits on many rays at once.
+
+    The same model as :func:`hit_covariance`, with every input given per hit (each hit
+    carries its own ray), so the hits of a whole batch of rays take one call.
+
+    Parameters
+    ----------
+    direction_enu : ndarray, shape (m, 3)
+        Unit direction of each hit's ray, site frame.
+    range_m : ndarray, shape (m,)
+        Range of each hit along its ray (m).
+    gradient : ndarray, shape (m, 2)
+        Terrain slope ``(dz/dx, dz/dy)`` at each hit.
+    perturb_axes_enu : ndarray, shape (m, a, 3)
+        Unit directions, perpendicular to each hit's ray, towards which it may err.
+    perturb_sigmas_rad : ndarray, shape (m, a)
+        1-sigma angular error along each axis (rad).
+    sigma_z_m : ndarray, shape (m,)
+        1-sigma vertical error of the terrain at each hit (m).
+
+    Returns
+    -------
+    ndarray, shape (m, 2, 2)
+        Covariance of each hit's east/north position.
+    """
+    d = np.asarray(direction_enu, dtype=np.float64).reshape(-1, 3)
+    lam = np.asarray(range_m, dtype=np.float64).reshape(-1)
+    g = np.asarray(gradient, dtype=np.float64).reshape(-1, 2)
+    axes = np.asarray(perturb_axes_enu, dtype=np.float64)
+    sigs = np.asarray(perturb_sigmas_rad, dtype=np.float64)
+    d_xy = d[:, :2]
+    fprime = d[:, 2] - (g[:, 0] * d[:, 0] + g[:, 1] * d[:, 1])
+    fprime = np.where(np.abs(fprime) < 1e-9, -1e-9, fprime)
+    disp = (np.asarray(sigma_z_m, dtype=np.float64).reshape(-1) / fprime)[:, None] * d_xy
+    cov = disp[:, :, None] * disp[:, None, :]
+    for j in range(axes.shape[1]):
+        e, sig = axes[:, j], sigs[:, j]
+        dlam = -lam * sig * (e[:, 2] - (g[:, 0] * e[:, 0] + g[:, 1] * e[:, 1])) / fprime
+        disp = (lam * sig)[:, None] * e[:, :2] + dlam[:, None] * d_xy
         cov += disp[:, :, None] * disp[:, None, :]
     return cov
