@@ -36,7 +36,6 @@ convoy L = 100 m):
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -45,9 +44,8 @@ import shapely
 
 from demtrack.core.activity import Zone
 from demtrack.core.errors import SiteError
-from demtrack.core.raycast import RayCaster
 from demtrack.core.site import Site
-from demtrack.core.tracking.types import Detection, TruthPath
+from demtrack.core.tracking.types import TruthPath
 
 from .routes import Motion, Route, drive, offset_lane, resample_polyline, smooth_polyline
 from .scenarios import (
@@ -57,13 +55,9 @@ from .scenarios import (
     Scenario,
     ScenarioParams,
     Target,
-    _false_alarm,
-    _noisy,
     _truth,
-    image_boxes,
+    render_targets,
     site_world,
-    target_points,
-    true_cameras,
 )
 from .world import World
 
@@ -354,70 +348,6 @@ ACTIVITY_CASES: dict[str, Callable[[World], ActivityCase]] = {
 
 
 # ---------------------------------------------------------------- rendering
-def render_targets(
-    site: Site,
-    world: World,
-    name: str,
-    targets: Sequence[Target],
-    params: ScenarioParams,
-) -> Scenario:
-    """Detections and truth for ``targets``, seen by the site's true cameras.
-
-    The same image model as :func:`demtrack.samplesite.scenarios.make_scenario` (box
-    sample points cast against the site DEM, edge noise, misses, false alarms), for
-    targets given directly rather than by scenario name.
-    """
-    cameras = true_cameras(site)
-    caster = RayCaster.from_dem(site.dem)
-    t0 = min(tg.motion.t_start for tg in targets)
-    t1 = max(tg.motion.t_end for tg in targets)
-    frames = np.arange(0, int(math.floor((t1 - t0) * params.rate_hz)) + 1) / params.rate_hz + t0
-    geometry: dict[tuple[str, int], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-    for tg in targets:
-        active = (frames >= tg.motion.t_start) & (frames <= tg.motion.t_end)
-        xy, head = tg.motion.pose(frames[active])
-        pts = target_points(xy, head, tg.size_m, world)
-        for sid, cam in cameras.items():
-            boxes = np.full((len(frames), 4), np.nan)
-            fraction = np.zeros(len(frames))
-            in_view = np.zeros(len(frames), dtype=bool)
-            if len(pts):
-                boxes[active], fraction[active], in_view[active] = image_boxes(cam, caster, pts)
-            geometry[(sid, tg.target_id)] = (boxes, fraction, in_view)
-    rng = np.random.default_rng(params.seed)
-    stats = dict.fromkeys(
-        ("frames", "in_view", "detected", "partly_hidden", "hidden", "missed", "false_alarms"), 0
-    )
-    stats["frames"] = len(frames)
-    detections: list[Detection] = []
-    for i, t in enumerate(frames):
-        for sid in sorted(cameras):
-            for tg in targets:
-                boxes, fraction, in_view = geometry[(sid, tg.target_id)]
-                if not in_view[i]:
-                    continue
-                stats["in_view"] += 1
-                if not np.isfinite(boxes[i, 0]) or fraction[i] < params.min_visible:
-                    stats["hidden"] += 1
-                    continue
-                if rng.random() < params.p_miss:
-                    stats["missed"] += 1
-                    continue
-                if fraction[i] < 0.999:
-                    stats["partly_hidden"] += 1
-                stats["detected"] += 1
-                score = round(0.5 + 0.5 * float(fraction[i]) - 0.05 * float(rng.random()), 3)
-                box = _noisy(tuple(boxes[i]), params.noise_px, rng)
-                detections.append(Detection(float(t), sid, box, tg.cls, score))  # type: ignore[arg-type]
-            for _ in range(rng.poisson(params.false_alarm_rate)):
-                cls, box = _false_alarm(cameras[sid], rng)
-                stats["false_alarms"] += 1
-                score = round(float(rng.uniform(0.3, 0.7)), 3)
-                detections.append(Detection(float(t), sid, box, cls, score))  # type: ignore[arg-type]
-    truths: list[TruthPath] = [_truth(tg, world) for tg in targets]
-    return Scenario(name, params, detections, truths, stats)
-
-
 def truth_paths(case: ActivityCase, world: World, dt_s: float = 0.05) -> list[TruthPath]:
     """The true paths of a case's targets, sampled every ``dt_s`` (s), without rendering."""
     return [_truth(tg, world, dt_s) for tg in case.targets]

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -53,6 +53,7 @@ __all__ = [
     "image_boxes",
     "site_world",
     "make_scenario",
+    "render_targets",
     "read_truth_json",
     "target_points",
     "true_cameras",
@@ -438,6 +439,21 @@ def make_scenario(site: Site, name: str, params: ScenarioParams | None = None) -
     params = ScenarioParams() if params is None else params
     world = site_world(site)
     targets = SCENARIOS[name](world)
+    return render_targets(site, world, name, targets, params)
+
+
+def render_targets(
+    site: Site,
+    world: World,
+    name: str,
+    targets: Sequence[Target],
+    params: ScenarioParams,
+) -> Scenario:
+    """Detections and truth for ``targets``, seen by the site's true cameras.
+
+    Box sample points are cast against the site DEM (occlusion by trees and buildings),
+    then edge noise, misses and false alarms are drawn from ``params``.
+    """
     cameras = true_cameras(site)
     caster = RayCaster.from_dem(site.dem)
     t0 = min(tg.motion.t_start for tg in targets)
