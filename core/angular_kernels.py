@@ -31,14 +31,12 @@ import numpy as np
 from numba import njit, prange
 
 from .raycast_kernels import (
-    DEDUPE_M,
     HIT,
     MISS,
-    ROOT_WINDOW_M,
     _prepare,
-    _solve_at,
-    _solve_patch,
     _walk,
+    keep_root,
+    patch_root,
 )
 
 __all__ = [
@@ -490,34 +488,12 @@ def _walk_cells(
         z_exit = z0 + t_exit * uz
         zl = min(z_cur, z_exit) - margin
         zh = max(z_cur, z_exit) + margin
-        e00 = np.float64(elev[ny, nx])
-        e01 = np.float64(elev[ny, nx + 1])
-        e10 = np.float64(elev[ny + 1, nx])
-        e11 = np.float64(elev[ny + 1, nx + 1])
-        s = np.nan
-        if e00 != e00 or e01 != e01 or e10 != e10 or e11 != e11:
-            crossed = True
-            on_x = kx == 0.0 and nx > 0 and gx0 == nx
-            on_y = ky == 0.0 and ny > 0 and gy0 == ny
-            if on_x:
-                s = _solve_at(elev, ny, nx - 1, gx0, gy0, kx, ky, uz, t_cur, z_cur)
-            if on_y and s != s:
-                s = _solve_at(elev, ny - 1, nx, gx0, gy0, kx, ky, uz, t_cur, z_cur)
-            if on_x and on_y and s != s:
-                s = _solve_at(elev, ny - 1, nx - 1, gx0, gy0, kx, ky, uz, t_cur, z_cur)
-        elif zl < max(max(e00, e01), max(e10, e11)) and zh > min(min(e00, e01), min(e10, e11)):
-            s = _solve_patch(e00, e01, e10, e11, nx, ny, gx0, gy0, kx, ky, uz, t_cur, z_cur)
-        seg = t_exit - t_cur
-        if s >= -ROOT_WINDOW_M and s <= seg + ROOT_WINDOW_M:
-            t_hit = t_cur + min(max(s, 0.0), seg)
-            if t_hit - last_t > DEDUPE_M:
-                if count < cap:
-                    hits[base + count] = t_hit
-                count += 1
-                last_t = t_hit
-                if first_only or count > max_count:
-                    stop = True
-                    break
+        s, hole = patch_root(elev, nx, ny, gx0, gy0, kx, ky, uz, t_cur, z_cur, zl, zh)
+        crossed = crossed or hole
+        count, last_t, kept = keep_root(s, t_cur, t_exit, hits, base, cap, count, last_t)
+        if kept and (first_only or count > max_count):
+            stop = True
+            break
         if t_exit >= t2:
             break
         if tmx <= tmy:

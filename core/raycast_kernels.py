@@ -276,6 +276,58 @@ def _solve_at(elev, iy, ix, gx0, gy0, kx, ky, uz, t0, z_t0):  # pragma: no cover
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def patch_root(elev, nx, ny, gx0, gy0, kx, ky, uz, t_cur, z_cur, zl, zh):  # pragma: no cover
+    """Where the ray crosses patch ``(ny, nx)`` from ``t_cur`` on; NaN when it does not.
+
+    ``zl, zh`` bound the ray's height over the patch (with margin). Returns ``(s, hole)``:
+    ``s`` the crossing's distance past ``t_cur``, ``hole`` whether the patch has a nodata
+    corner (it cannot be hit).
+    """
+    e00 = np.float64(elev[ny, nx])
+    e01 = np.float64(elev[ny, nx + 1])
+    e10 = np.float64(elev[ny + 1, nx])
+    e11 = np.float64(elev[ny + 1, nx + 1])
+    s = np.nan
+    hole = False
+    if e00 != e00 or e01 != e01 or e10 != e10 or e11 != e11:
+        hole = True
+        # A ray lying exactly on a grid line borders two patches (four at a vertex);
+        # when the walked one is a hole the surface on the shared edge may still be
+        # defined by the other one.
+        on_x = kx == 0.0 and nx > 0 and gx0 == nx
+        on_y = ky == 0.0 and ny > 0 and gy0 == ny
+        if on_x:
+            s = _solve_at(elev, ny, nx - 1, gx0, gy0, kx, ky, uz, t_cur, z_cur)
+        if on_y and s != s:
+            s = _solve_at(elev, ny - 1, nx, gx0, gy0, kx, ky, uz, t_cur, z_cur)
+        if on_x and on_y and s != s:
+            s = _solve_at(elev, ny - 1, nx - 1, gx0, gy0, kx, ky, uz, t_cur, z_cur)
+    elif zl < max(max(e00, e01), max(e10, e11)) and zh > min(min(e00, e01), min(e10, e11)):
+        s = _solve_patch(e00, e01, e10, e11, nx, ny, gx0, gy0, kx, ky, uz, t_cur, z_cur)
+    return s, hole
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def keep_root(s, t_cur, t_exit, hits, base, cap, count, last_t):  # pragma: no cover - numba
+    """Record a patch crossing ``s`` (past ``t_cur``) if it lies in the walked segment.
+
+    Accepts roots within ``ROOT_WINDOW_M`` of ``[t_cur, t_exit]`` (clamped into it) that
+    are more than ``DEDUPE_M`` past the previous hit. Returns ``(count, last_t, kept)``.
+    """
+    seg = t_exit - t_cur
+    kept = False
+    if s >= -ROOT_WINDOW_M and s <= seg + ROOT_WINDOW_M:
+        t_hit = t_cur + min(max(s, 0.0), seg)
+        if t_hit - last_t > DEDUPE_M:
+            if count < cap:
+                hits[base + count] = t_hit
+            count += 1
+            last_t = t_hit
+            kept = True
+    return count, last_t, kept
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def _walk(
     elev,
     nodes,
@@ -383,36 +435,11 @@ def _walk(
                 ny = min(ny, nrl - 1)
                 continue
         else:
-            e00 = np.float64(elev[ny, nx])
-            e01 = np.float64(elev[ny, nx + 1])
-            e10 = np.float64(elev[ny + 1, nx])
-            e11 = np.float64(elev[ny + 1, nx + 1])
-            s = np.nan
-            if e00 != e00 or e01 != e01 or e10 != e10 or e11 != e11:
-                crossed = True
-                # A ray lying exactly on a grid line borders two patches (four at a
-                # vertex); when the walked one is a hole the surface on the shared edge
-                # may still be defined by the other one.
-                on_x = kx == 0.0 and nx > 0 and gx0 == nx
-                on_y = ky == 0.0 and ny > 0 and gy0 == ny
-                if on_x:
-                    s = _solve_at(elev, ny, nx - 1, gx0, gy0, kx, ky, uz, t_cur, z_cur)
-                if on_y and s != s:
-                    s = _solve_at(elev, ny - 1, nx, gx0, gy0, kx, ky, uz, t_cur, z_cur)
-                if on_x and on_y and s != s:
-                    s = _solve_at(elev, ny - 1, nx - 1, gx0, gy0, kx, ky, uz, t_cur, z_cur)
-            elif zl < max(max(e00, e01), max(e10, e11)) and zh > min(min(e00, e01), min(e10, e11)):
-                s = _solve_patch(e00, e01, e10, e11, nx, ny, gx0, gy0, kx, ky, uz, t_cur, z_cur)
-            seg = t_exit - t_cur
-            if s >= -ROOT_WINDOW_M and s <= seg + ROOT_WINDOW_M:
-                t_hit = t_cur + min(max(s, 0.0), seg)
-                if t_hit - last_t > DEDUPE_M:
-                    if count < cap:
-                        hits[base + count] = t_hit
-                    count += 1
-                    last_t = t_hit
-                    if first_only or count > max_count:
-                        break
+            s, hole = patch_root(elev, nx, ny, gx0, gy0, kx, ky, uz, t_cur, z_cur, zl, zh)
+            crossed = crossed or hole
+            count, last_t, kept = keep_root(s, t_cur, t_exit, hits, base, cap, count, last_t)
+            if kept and (first_only or count > max_count):
+                break
         # Nothing (more) in this node: step through the face crossed first.
         if t_exit >= t_end:
             break
