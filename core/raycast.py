@@ -428,11 +428,18 @@ def cast_rays(
     )
 
 
-def warm_up() -> None:
+def warm_up(angular: bool = True) -> None:
     """Compile (or load from numba's on-disk cache) every kernel, on a tiny DEM.
 
     The server calls this at start-up so the first real request does not pay for
-    compilation (about 15 s cold on two cores; well under a second from the cache).
+    compilation (about 25 s of CPU cold for the pyramid kernels, about 60 s more for the
+    angular-index kernels; well under a second from the cache).
+
+    Parameters
+    ----------
+    angular : bool
+        Also compile the angular-index kernels, used only by casts of at least
+        ``MIN_COHERENT_RUN`` rays from one origin (or ``coherent=True``).
     """
     elev = np.arange(16, dtype=np.float32).reshape(4, 4)
     elev[0, 0] = np.nan
@@ -441,16 +448,22 @@ def warm_up() -> None:
     d = np.array([[0.1, 0.1, -1.0], [0.0, 0.0, -1.0]])
     caster.cast(o, d, mode="first")
     caster.cast(o, d, mode="all", max_hits=8)
-    # The angular-index path (camera rays): build, cast, and the pyramid walk between runs.
-    o3 = np.array([[2.0, 2.0, 100.0], [2.0, 2.0, 100.0], [0.5, 3.5, 100.0]])
-    d3 = np.array([[0.1, 0.1, -1.0], [0.2, -0.1, -1.0], [0.0, 0.0, -1.0]])
-    caster.cast(o3, d3, mode="first", coherent=True)
-    caster.cast(o3, d3, mode="all", max_hits=8, coherent=True)
+    if angular:
+        # The angular-index path (camera rays): build, cast, and the pyramid walk between runs.
+        _warm_angular(caster)
     # A level ray over a zig-zag crosses more often than the first pass keeps: this
     # compiles the re-walk kernel too.
     zig = np.tile(np.array([0.0, 10.0], np.float32), 8)
     zigzag = SimpleNamespace(grid=GridSpec(0.0, 2.0, 1.0, 2, 16), elevation=np.vstack([zig, zig]))
     cast_rays(zigzag, np.array([[0.5, 1.0, 5.0]]), np.array([[1.0, 0.0, 0.0]]))
+
+
+def _warm_angular(caster: RayCaster) -> None:
+    """Compile the angular-index kernels (build, cast, the walk between runs)."""
+    o3 = np.array([[2.0, 2.0, 100.0], [2.0, 2.0, 100.0], [0.5, 3.5, 100.0]])
+    d3 = np.array([[0.1, 0.1, -1.0], [0.2, -0.1, -1.0], [0.0, 0.0, -1.0]])
+    caster.cast(o3, d3, mode="first", coherent=True)
+    caster.cast(o3, d3, mode="all", max_hits=8, coherent=True)
 
 
 def _validate_rays(

@@ -66,7 +66,9 @@ def render_view(
     intr = camera.intrinsics
     v, u = np.mgrid[0 : intr.height, 0 : intr.width]
     origins, dirs = camera.pixel_to_ray(u.ravel(), v.ravel())
-    hits = cast_rays(dem, origins, dirs, max_range_m, mode="first")
+    # One cast per camera (site build): the angular index's build and its one-time kernel
+    # compile (about a minute of CPU on a cold numba cache) cost more than it saves here.
+    hits = cast_rays(dem, origins, dirs, max_range_m, mode="first", coherent=False)
     p = hits.first_points()
     has = np.isfinite(p[:, 0])
     # Sky: blend from horizon to zenith with the ray's elevation.

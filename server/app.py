@@ -103,7 +103,7 @@ def _warm_kernels(done: threading.Event) -> None:
     """
     t0 = time.perf_counter()
     try:
-        warm_up()
+        warm_up(angular=False)  # requests cast small batches: the pyramid walk only
         undistort_normalized_nb(np.array([0.1]), np.array([0.1]), -0.04, 0.0, 0.0, 0.0, 0.0)
         log.info("ray-casting kernels ready in %.1f s", time.perf_counter() - t0)
     except Exception:  # noqa: BLE001 - a failed warm-up only costs the first request time
