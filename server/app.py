@@ -44,6 +44,7 @@ from .routers import (
     stream,
     synopsis,
     tracks,
+    visibility,
     web,
 )
 from .security import require_reader, resolve_token
@@ -233,6 +234,7 @@ def create_app(settings: Settings | None = None, **overrides: Any) -> FastAPI:
     app.include_router(tracks.router, dependencies=reader)
     app.include_router(synopsis.router, dependencies=reader)
     app.include_router(events.router, dependencies=reader)
+    app.include_router(visibility.router, dependencies=reader)
     app.include_router(stream.router)
     app.include_router(web.router)
     return app

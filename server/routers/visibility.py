@@ -1,0 +1,307 @@
+"""Visibility for the map: per-sensor viewsheds as GeoJSON, the coverage raster, blind spots.
+
+Everything here is computed by :func:`demtrack.core.visibility.viewshed` (the ``"sweep"``
+method, as ``demtrack viewshed`` does) for each sensor at its current pan and tilt, and
+kept in a small bounded cache in the server state: a parameter set is computed once.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+from collections.abc import Callable
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from fastapi import APIRouter, Query, Response
+from starlette.concurrency import run_in_threadpool
+
+from demtrack.core.site import Sensor
+from demtrack.core.visibility import blind_spots, viewshed
+
+from ..imagery import png_bytes
+from ..state import ConsoleState, StateDep
+from .sensors import sensor_or_404
+
+__all__ = ["COVERAGE_RGBA", "coverage_rgba", "router", "viewshed_multipolygon"]
+
+router = APIRouter(tags=["visibility"])
+_PNG = {"content": {"image/png": {}}, "description": "PNG image"}
+
+#: Colour of a cell seen by 1, 2, 3 and 4 or more sensors (RGBA); unseen cells are clear.
+COVERAGE_RGBA: tuple[tuple[int, int, int, int], ...] = (
+    (255, 221, 51, 140),
+    (255, 150, 20, 160),
+    (230, 70, 30, 175),
+    (160, 20, 90, 190),
+)
+#: Parameter sets kept (each holds a mask per sensor and its renderings).
+_CACHE_ENTRIES = 48
+
+TargetHeight = Annotated[
+    float,
+    Query(
+        ge=0.0,
+        le=1000.0,
+        allow_inf_nan=False,
+        description="target point above the surface (m): about 1.7 for a person, 1.5 for a car",
+    ),
+]
+MaxRange = Annotated[
+    float,
+    Query(gt=0.0, le=100_000.0, allow_inf_nan=False, description="3-D range limit (m)"),
+]
+Mode = Annotated[
+    Literal["fov", "reachable"],
+    Query(description="current field of view, or anywhere the pan-tilt head can point"),
+]
+
+
+class _Lru:
+    """A bounded compute-once cache (least recently used entries go first)."""
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+        self.items: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
+        self.lock = threading.RLock()
+
+    def get(self, key: tuple[Any, ...], make: Callable[[], Any]) -> Any:
+        with self.lock:  # held while computing: one request computes, the others wait
+            if key in self.items:
+                self.items.move_to_end(key)
+                return self.items[key]
+            value = make()
+            self.items[key] = value
+            while len(self.items) > self.size:
+                self.items.popitem(last=False)
+            return value
+
+
+def _lru(state: ConsoleState) -> _Lru:
+    return state.cached("visibility", lambda: _Lru(_CACHE_ENTRIES))
+
+
+def _mask(
+    state: ConsoleState, sensor: Sensor, mode: str, target_height_m: float, max_range_m: float
+) -> np.ndarray:
+    """The sensor's viewshed (bool, DEM grid shape), computed once per parameter set."""
+    key = ("mask", sensor.id, sensor.pan_deg, sensor.tilt_deg, mode, target_height_m, max_range_m)
+
+    def make() -> np.ndarray:
+        m = viewshed(
+            state.site.dem,
+            sensor.camera,
+            mode=mode,
+            target_height_m=target_height_m,
+            max_range_m=max_range_m,
+            mount_yaw_deg=sensor.head.mount_yaw_deg,
+        )
+        m.setflags(write=False)
+        return m
+
+    return _lru(state).get(key, make)
+
+
+def _count(state: ConsoleState, mode: str, target_height_m: float, max_range_m: float) -> Any:
+    """Per-sensor masks and how many sensors see each cell (uint16, DEM grid shape)."""
+    key = ("count", mode, target_height_m, max_range_m)
+
+    def make() -> tuple[dict[str, np.ndarray], np.ndarray]:
+        masks = {
+            sid: _mask(state, state.site.sensors[sid], mode, target_height_m, max_range_m)
+            for sid in sorted(state.site.sensors)
+        }
+        count = np.zeros(state.site.dem.grid.shape, np.uint16)
+        for m in masks.values():
+            count += m
+        return masks, count
+
+    return _lru(state).get(key, make)
+
+
+def viewshed_multipolygon(mask: np.ndarray, transform: Any) -> list[list[list[list[float]]]]:
+    """The True cells of ``mask`` as MultiPolygon coordinates (site frame, m).
+
+    Cell squares are merged by ``rasterio.features.shapes`` (4-connected), so every edge
+    lies on a cell boundary and a polygon covers exactly the centres of its cells. Rings
+    follow RFC 7946: exteriors counter-clockwise, holes clockwise.
+    """
+    from rasterio.features import shapes
+    from shapely.geometry import shape
+    from shapely.geometry.polygon import orient
+
+    m = np.ascontiguousarray(mask, dtype=np.uint8)
+    out = []
+    for geom, _ in shapes(m, mask=m.astype(bool), transform=transform, connectivity=4):
+        poly = orient(shape(geom), sign=1.0)
+        rings = [poly.exterior, *poly.interiors]
+        out.append([[[float(x), float(y)] for x, y in r.coords] for r in rings])
+    return out
+
+
+def _to_lonlat(state: ConsoleState, polys: list[Any]) -> list[Any]:
+    """Map MultiPolygon coordinates from the site frame to [lon, lat] (on the plane u = 0)."""
+    flat = np.array([p for poly in polys for ring in poly for p in ring], float).reshape(-1, 2)
+    if not len(flat):
+        return []
+    lat, lon, _ = state.site.frame.to_geodetic(flat[:, 0], flat[:, 1], np.zeros(len(flat)))
+    ll = iter(zip(np.atleast_1d(lon).tolist(), np.atleast_1d(lat).tolist(), strict=True))
+    return [[[list(next(ll)) for _ in ring] for ring in poly] for poly in polys]
+
+
+@router.get("/api/sensors/{sensor_id}/viewshed.geojson", summary="What a sensor sees")
+async def sensor_viewshed(
+    sensor_id: str,
+    state: StateDep,
+    target_height_m: TargetHeight = 1.7,
+    max_range_m: MaxRange = 1000.0,
+    mode: Mode = "fov",
+    frame: Literal["lonlat", "enu"] = Query(
+        "lonlat", description="coordinates: lon/lat (RFC 7946) or site-frame east/north metres"
+    ),
+) -> dict[str, Any]:
+    """GeoJSON FeatureCollection with one MultiPolygon: the cells the sensor sees.
+
+    A cell is seen when the sight line to a point ``target_height_m`` above its centre
+    meets no terrain (trees and roofs occlude), within ``max_range_m`` and, for
+    ``mode=fov``, inside the image at the sensor's current pan and tilt. The polygons
+    follow cell edges; ``properties.area_m2`` = cells x cell area.
+    """
+    sensor = sensor_or_404(state, sensor_id)
+
+    def make() -> dict[str, Any]:
+        mask = _mask(state, sensor, mode, target_height_m, max_range_m)
+        g = state.site.dem.grid
+        polys = viewshed_multipolygon(mask, g.transform)
+        if frame == "lonlat":
+            polys = _to_lonlat(state, polys)
+        cells = int(mask.sum())
+        doc: dict[str, Any] = {
+            "type": "FeatureCollection",
+            "features": [
+                {
+                    "type": "Feature",
+                    "properties": {
+                        "sensor": sensor.id,
+                        "name": sensor.name,
+                        "pan_deg": sensor.pan_deg,
+                        "tilt_deg": sensor.tilt_deg,
+                        "mode": mode,
+                        "target_height_m": target_height_m,
+                        "max_range_m": max_range_m,
+                        "cells": cells,
+                        "cell_m": g.cell_m,
+                        "area_m2": cells * g.cell_m**2,
+                    },
+                    "geometry": {"type": "MultiPolygon", "coordinates": polys},
+                }
+            ],
+        }
+        if frame == "enu":
+            doc["frame"] = "site ENU (m)"
+        return doc
+
+    key = ("geojson", sensor.id, sensor.pan_deg, sensor.tilt_deg, mode, target_height_m)
+    key += (max_range_m, frame)
+    return await run_in_threadpool(_lru(state).get, key, make)
+
+
+def coverage_rgba(count: np.ndarray) -> np.ndarray:
+    """``(nrows, ncols, 4)`` uint8: :data:`COVERAGE_RGBA` by sensor count, clear where 0."""
+    palette = np.array([(0, 0, 0, 0), *COVERAGE_RGBA], np.uint8)
+    return palette[np.minimum(np.asarray(count), len(COVERAGE_RGBA))]
+
+
+@router.get(
+    "/api/site/coverage.png",
+    response_class=Response,
+    responses={200: _PNG},
+    summary="How many sensors see each cell",
+)
+async def coverage_png(
+    state: StateDep,
+    target_height_m: TargetHeight = 1.7,
+    max_range_m: MaxRange = 1000.0,
+    mode: Mode = "fov",
+) -> Response:
+    """The number of sensors that see each cell, on the DEM grid.
+
+    Placed like ``relief.png``: pixel (0, 0) is the north-west cell, the image spans the
+    grid's outer bounds. Colours by count (``legend`` in ``coverage.json``); clear where no
+    sensor sees the cell.
+    """
+
+    def make() -> bytes:
+        _, count = _count(state, mode, target_height_m, max_range_m)
+        return png_bytes(coverage_rgba(count))
+
+    key = ("png", mode, target_height_m, max_range_m)
+    return Response(await run_in_threadpool(_lru(state).get, key, make), media_type="image/png")
+
+
+@router.get("/api/site/coverage.json", summary="Coverage per sensor and blind spots")
+async def coverage_json(
+    state: StateDep,
+    target_height_m: TargetHeight = 1.7,
+    max_range_m: MaxRange = 1000.0,
+    mode: Mode = "fov",
+    min_area_m2: float = Query(
+        25.0, ge=0.0, le=1e12, allow_inf_nan=False, description="smallest blind spot listed"
+    ),
+    limit: int = Query(20, ge=0, le=10_000, description="blind spots listed (largest first)"),
+) -> dict[str, Any]:
+    """What ``demtrack viewshed`` prints, as JSON.
+
+    The area each sensor sees, the share of the site seen by at least k sensors, and the
+    blind spots (8-connected unseen areas of at least ``min_area_m2``), largest first.
+    """
+
+    def make() -> dict[str, Any]:
+        site = state.site
+        masks, count = _count(state, mode, target_height_m, max_range_m)
+        cell_area = site.dem.grid.cell_m**2
+        data_cells = int((~site.dem.nodata).sum())
+        share = 1.0 / data_cells if data_cells else 0.0
+        spots = blind_spots(count, site.dem, min_area_m2=min_area_m2)
+        shown = spots[:limit]
+        e = np.array([b.centroid_e_m for b in shown], float)
+        n = np.array([b.centroid_n_m for b in shown], float)
+        lat, lon, _ = site.frame.to_geodetic(e, n, np.zeros(len(e)))
+        return {
+            "mode": mode,
+            "target_height_m": target_height_m,
+            "max_range_m": max_range_m,
+            "cell_m": site.dem.grid.cell_m,
+            "site_area_m2": data_cells * cell_area,
+            "sensors": [
+                {
+                    "id": sid,
+                    "name": site.sensors[sid].name,
+                    "cells": int(m.sum()),
+                    "area_m2": int(m.sum()) * cell_area,
+                    "share": int(m.sum()) * share,
+                }
+                for sid, m in masks.items()
+            ],
+            "seen_by_at_least": {
+                str(k): int((count >= k).sum()) * share for k in range(1, len(masks) + 1)
+            },
+            "legend": [
+                {"count": k, "rgba": list(c), "or_more": k == len(COVERAGE_RGBA)}
+                for k, c in enumerate(COVERAGE_RGBA, start=1)
+            ],
+            "min_area_m2": min_area_m2,
+            "blind_spot_count": len(spots),
+            "blind_spots": [
+                {
+                    "area_m2": b.area_m2,
+                    "centroid_enu": [b.centroid_e_m, b.centroid_n_m],
+                    "centroid_lonlat": [float(lo), float(la)],
+                    "bbox_enu": list(b.bbox),
+                }
+                for b, lo, la in zip(shown, np.atleast_1d(lon), np.atleast_1d(lat), strict=True)
+            ],
+        }
+
+    key = ("json", mode, target_height_m, max_range_m, min_area_m2, limit)
+    return await run_in_threadpool(_lru(state).get, key, make)
