@@ -55,8 +55,10 @@ class ConstantVelocity:
         axis = q * np.array([[dt_s**3 / 3.0, dt_s**2 / 2.0], [dt_s**2 / 2.0, dt_s]])
         out = np.zeros((4, 4))
         for k in (0, 1):  # x with vx, y with vy
-            idx = np.ix_([k, k + 2], [k, k + 2])
-            out[idx] = axis
+            out[k, k] = axis[0, 0]
+            out[k, k + 2] = axis[0, 1]
+            out[k + 2, k] = axis[1, 0]
+            out[k + 2, k + 2] = axis[1, 1]
         return out
 
 

@@ -384,8 +384,8 @@ class Tracker:
         for k, xy in enumerate(revised, start=first):
             old, cands = rec.points[k], rec.cands[k + offset]
             near = int(np.argmin(np.sum((cands.z_enu[:, :2] - xy) ** 2, axis=1)))
-            p = np.array([xy[0], xy[1], cands.z_enu[near, 2]])
-            rec.points[k] = TrackPoint(old.t_s, p, old.sensors, old.fix_indices, old.cov_xy)
+            p = np.array([xy[0], xy[1], cands.z_enu[near, 2]], dtype=np.float64)
+            rec.points[k] = old._moved(p)
 
     def _confirm(self, rec: _Record, t: float) -> None:
         """Give ``rec`` an id and let its filter revise the points made while tentative.

@@ -44,11 +44,14 @@ def _frozen_array(
         arr = np.array(value, dtype=np.float64)
     except (TypeError, ValueError) as err:
         raise exc(f"{name} must be numeric, got {value!r}") from err
-    if arr.ndim != len(shape) or any(
-        want is not None and have != want for have, want in zip(arr.shape, shape, strict=True)
+    if arr.shape != shape and (
+        arr.ndim != len(shape)
+        or any(
+            want is not None and have != want for have, want in zip(arr.shape, shape, strict=True)
+        )
     ):
         raise exc(f"{name} must have shape {shape}, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
+    if not np.isfinite(arr).all():
         raise exc(f"{name} must be finite")
     arr.setflags(write=False)
     return arr
@@ -195,6 +198,46 @@ class Fix:
             sym.setflags(write=False)
             object.__setattr__(self, "hit_cov_en_m2", sym)
 
+    @classmethod
+    def _trusted(
+        cls,
+        t_s: float,
+        sensor: str,
+        obj_cls: ObjectClass,
+        detection_index: int,
+        origin_enu: np.ndarray,
+        direction_enu: np.ndarray,
+        hits_enu: np.ndarray,
+        hit_sigma_m: np.ndarray,
+        road_hit_enu: np.ndarray | None,
+        score: float | None,
+        hit_cov_en_m2: np.ndarray | None,
+    ) -> Fix:
+        """Internal: a fix from values already in the form ``__post_init__`` gives.
+
+        No copy and no check: the caller guarantees what the public constructor would
+        (float ``t_s``, a known class, int index, read-only finite float64 arrays of the
+        documented shapes, a unit ``direction_enu``, positive ``hit_sigma_m``, symmetric
+        positive definite ``hit_cov_en_m2``). For batch builders such as
+        :func:`demtrack.core.fix_builder.build_fixes`, which check whole arrays at once.
+        """
+        fix = object.__new__(cls)
+        for name, value in (
+            ("t_s", t_s),
+            ("sensor", sensor),
+            ("cls", obj_cls),
+            ("detection_index", detection_index),
+            ("origin_enu", origin_enu),
+            ("direction_enu", direction_enu),
+            ("hits_enu", hits_enu),
+            ("hit_sigma_m", hit_sigma_m),
+            ("road_hit_enu", road_hit_enu),
+            ("score", score),
+            ("hit_cov_en_m2", hit_cov_en_m2),
+        ):
+            object.__setattr__(fix, name, value)
+        return fix
+
     @property
     def n_hits(self) -> int:
         """Number of terrain hits ``k``."""
@@ -240,6 +283,25 @@ class TrackPoint:
             object.__setattr__(self, "cov_xy", cov)
         object.__setattr__(self, "sensors", tuple(self.sensors))
         object.__setattr__(self, "fix_indices", tuple(int(i) for i in self.fix_indices))
+
+    def _moved(self, p_enu: np.ndarray) -> TrackPoint:
+        """Internal: this point at another position ``p_enu`` (3,), float64 (m).
+
+        Checks only what the new position brings (finite); time, sensors, indices and
+        covariance are this point's, already checked.
+        """
+        if p_enu.shape != (3,) or p_enu.dtype != np.float64:
+            return TrackPoint(self.t_s, p_enu, self.sensors, self.fix_indices, self.cov_xy)
+        if not np.isfinite(p_enu).all():
+            raise TrackingError("p_enu must be finite")
+        p_enu.setflags(write=False)
+        point = object.__new__(TrackPoint)
+        object.__setattr__(point, "t_s", self.t_s)
+        object.__setattr__(point, "p_enu", p_enu)
+        object.__setattr__(point, "sensors", self.sensors)
+        object.__setattr__(point, "fix_indices", self.fix_indices)
+        object.__setattr__(point, "cov_xy", self.cov_xy)
+        return point
 
 
 @dataclass(frozen=True, eq=False)
