@@ -22,7 +22,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
-import numba
 import numpy as np
 
 from .camera import distortion_jacobian
@@ -34,7 +33,6 @@ from .uncertainty import hit_covariances
 
 __all__ = [
     "RULES",
-    "SERIAL_CAST_MAX_RAYS",
     "GroundHit",
     "Geolocation",
     "Geolocator",
@@ -371,7 +369,7 @@ class Geolocator:
         axes = np.asarray(perturb_axes_enu, dtype=np.float64).reshape(len(o), 2, 3)
         sig = np.asarray(perturb_sigmas_rad, dtype=np.float64).reshape(len(o), 2)
         n = len(o)
-        result = _cast(self.dem, o, d, self.max_range_m)
+        result = cast_rays(self.dem, o, d, self.max_range_m, mode="all")
         counts = np.diff(result.offsets)
         ray_of_hit = np.repeat(np.arange(n), counts)
         roads = self.roads
@@ -468,24 +466,6 @@ class Geolocator:
         if not hits:
             return ()
         return (hits[0],) if rule == "first" else (hits[-1],)
-
-
-#: Batches up to this many rays are cast on the calling thread: waking the kernels' thread
-#: pool costs more than it saves on a few thousand rays (milliseconds per launch on a busy
-#: machine against well under a millisecond of work).
-SERIAL_CAST_MAX_RAYS = 20_000
-
-
-def _cast(dem: Dem, origins: np.ndarray, directions: np.ndarray, max_range_m: float):
-    """``cast_rays(mode="all")``, serial for small batches (numba's setting is per thread)."""
-    if len(origins) > SERIAL_CAST_MAX_RAYS:
-        return cast_rays(dem, origins, directions, max_range_m, mode="all")
-    threads = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        return cast_rays(dem, origins, directions, max_range_m, mode="all")
-    finally:
-        numba.set_num_threads(threads)
 
 
 def _pixels(camera, u: Any, v: Any) -> tuple[np.ndarray, np.ndarray]:

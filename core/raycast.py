@@ -43,7 +43,9 @@ more, straight into the CSR arrays. The kernels use numba's thread pool
 
 from __future__ import annotations
 
+import contextlib
 import functools
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from enum import IntEnum
 from types import SimpleNamespace
@@ -86,6 +88,10 @@ _FIRST_PASS_HITS = 4
 #: Shortest run of consecutive rays sharing an origin that ``coherent=None`` casts with an
 #: angular index (building one costs about as much as casting ~50k rays without it).
 MIN_COHERENT_RUN = 20_000
+#: Casts of up to this many rays run on the calling thread: waking the kernels' thread pool
+#: costs more than it saves on a few thousand rays (milliseconds per launch on a busy machine
+#: against well under a millisecond of work).
+SERIAL_CAST_MAX_RAYS = 20_000
 
 
 class RayStatus(IntEnum):
@@ -304,46 +310,61 @@ class RayCaster:
             d,
             rng,
         )
-        threads = numba.get_num_threads()
-        runs = (
-            _ak.origin_runs_kernel(o, 1 if coherent else MIN_COHERENT_RUN)
-            if coherent is not False and n
-            else np.empty((0, 2), np.int64)
-        )
-        if len(runs) == 0:
-            _k.cast_kernel(*args, first, max_hits, threads, buf, counts, status, crossed, truncated)
-        else:
-            # Runs of one origin use its angular index; the rays between them take the
-            # pyramid walk (the same kernel with no azimuth bin built).
+        with _threads_for(n):
+            threads = numba.get_num_threads()
+            runs = (
+                _ak.origin_runs_kernel(o, 1 if coherent else MIN_COHERENT_RUN)
+                if coherent is not False and n
+                else np.empty((0, 2), np.int64)
+            )
             outs = (buf, counts, status, crossed, truncated)
-            a = 0
-            for r0, r1 in runs.tolist() + [[n, n]]:
-                if a < r0:
-                    ix = _no_index()
-                    _ak.cast_angular_kernel(
-                        *args, first, max_hits, threads, *_index_args(ix), a, r0, *outs
-                    )
-                if r0 < r1:
-                    ix = self._index_for(o[r0], d, r0, r1)
-                    _ak.cast_angular_kernel(
-                        *args, first, max_hits, threads, *_index_args(ix), r0, r1, *outs
-                    )
-                a = r1
-        offsets = np.zeros(n + 1, np.int64)
-        np.cumsum(counts, out=offsets[1:])
-        m = int(offsets[-1])
-        range_m = np.empty(m, np.float64)
-        points = np.empty((m, 3), np.float64)
-        # Hits that fit the first-pass buffer are copied (with their points); the few
-        # rays with more are re-walked straight into their CSR slots.
-        _k.gather_hits_kernel(buf, counts, offsets, o, d, range_m, points)
-        del buf
-        if not first:
-            big = np.flatnonzero(counts > cap).astype(np.int64)
-            if len(big):
-                _k.cast_all_refill_kernel(*args, max_hits, big, offsets, range_m)
-                _k.hit_points_kernel(o, d, big, offsets, range_m, points)
+            if len(runs) == 0:
+                _k.cast_kernel(*args, first, max_hits, threads, *outs)
+            else:
+                # Runs of one origin use its angular index; the rays between them take the
+                # pyramid walk (the same kernel with no azimuth bin built).
+                a = 0
+                for r0, r1 in runs.tolist() + [[n, n]]:
+                    if a < r0:
+                        ix = _no_index()
+                        _ak.cast_angular_kernel(
+                            *args, first, max_hits, threads, *_index_args(ix), a, r0, *outs
+                        )
+                    if r0 < r1:
+                        ix = self._index_for(o[r0], d, r0, r1)
+                        _ak.cast_angular_kernel(
+                            *args, first, max_hits, threads, *_index_args(ix), r0, r1, *outs
+                        )
+                    a = r1
+            offsets = np.zeros(n + 1, np.int64)
+            np.cumsum(counts, out=offsets[1:])
+            m = int(offsets[-1])
+            range_m = np.empty(m, np.float64)
+            points = np.empty((m, 3), np.float64)
+            # Hits that fit the first-pass buffer are copied (with their points); the few
+            # rays with more are re-walked straight into their CSR slots.
+            _k.gather_hits_kernel(buf, counts, offsets, o, d, range_m, points)
+            del buf
+            if not first:
+                big = np.flatnonzero(counts > cap).astype(np.int64)
+                if len(big):
+                    _k.cast_all_refill_kernel(*args, max_hits, big, offsets, range_m)
+                    _k.hit_points_kernel(o, d, big, offsets, range_m, points)
         return RayHits(offsets, range_m, points, status, crossed, truncated)
+
+
+@contextlib.contextmanager
+def _threads_for(n: int) -> Iterator[None]:
+    """One numba thread for small casts (the setting is per calling thread; restored)."""
+    if n > SERIAL_CAST_MAX_RAYS:
+        yield
+        return
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(threads)
 
 
 def _index_args(ix: Any) -> tuple:

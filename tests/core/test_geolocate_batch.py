@@ -8,6 +8,7 @@ import pytest
 import shapely
 
 from demtrack.core import geolocate as geolocate_mod
+from demtrack.core import raycast as raycast_mod
 from demtrack.core.fix_builder import build_fixes
 from demtrack.core.geolocate import RULES
 from demtrack.core.roads import RoadNetwork
@@ -186,7 +187,7 @@ def test_serial_and_threaded_casts_agree_and_the_thread_setting_is_restored(site
     threads = numba.get_num_threads()
     serial = geo.locate_pixels(views)
     assert numba.get_num_threads() == threads
-    monkeypatch.setattr(geolocate_mod, "SERIAL_CAST_MAX_RAYS", 0)
+    monkeypatch.setattr(raycast_mod, "SERIAL_CAST_MAX_RAYS", 0)
     threaded = geo.locate_pixels(views)
     for name in ("status", "offsets", "points_enu", "range_m", "cov_en_m2", "road_enu"):
         np.testing.assert_array_equal(getattr(serial, name), getattr(threaded, name))
