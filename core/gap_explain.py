@@ -34,6 +34,7 @@ from .camera import Camera
 from .dem import Dem
 from .errors import TrackingError
 from .raycast import cast_rays
+from .target_heights import target_height_for
 from .visibility import target_visible_fraction
 
 __all__ = ["REASONS", "GapExplanation", "Occlusion", "explain_gap", "explain_track_gaps"]
@@ -213,7 +214,7 @@ def explain_track_gaps(
     :func:`explain_gap`.
     """
     if height_m is None:
-        height_m = 1.7 if getattr(track, "cls", "vehicle") == "human" else 1.5
+        height_m = target_height_for(getattr(track, "cls", None))
     if path is None:
         path = _linear_path(np.asarray(track.t_s, float), np.asarray(track.p_enu, float))
     return [

@@ -38,6 +38,7 @@ from .camera import Camera
 from .dem import Dem
 from .errors import CameraError
 from .raycast import HEIGHT_MARGIN_M, cast_rays
+from .target_heights import DEFAULT_TARGET_HEIGHT_M
 
 __all__ = [
     "EARTH_RADIUS_M",
@@ -115,7 +116,7 @@ def viewshed(
     camera: Camera,
     *,
     mode: str = "fov",
-    target_height_m: float = 1.0,
+    target_height_m: float = DEFAULT_TARGET_HEIGHT_M,
     max_range_m: float = 1000.0,
     mount_yaw_deg: float = 0.0,
     limits: PanTiltLimits | None = None,
@@ -133,8 +134,9 @@ def viewshed(
     mode : {"fov", "reachable"}
         Current field of view, or anywhere within the pan-tilt ``limits``.
     target_height_m : float
-        Height of the target point above the surface (m): 0 for the ground itself, about
-        1 m for the middle of a person or a car.
+        Height of the target point above the surface (m): 0 for the ground itself; the
+        default is a standing person's head (1.7 m), a car's roof is 1.5 m
+        (:mod:`~demtrack.core.target_heights`).
     max_range_m : float
         Cells farther than this (3-D distance) are not seen.
     mount_yaw_deg : float
@@ -166,7 +168,7 @@ def viewshed(
     c = np.asarray(camera.position_enu, dtype=np.float64)
     th = float(target_height_m)
     curv = (1.0 - REFRACTION_K) / (2.0 * EARTH_RADIUS_M) if curvature else 0.0
-    cand = np.empty(g.shape, bool)
+    cand: np.ndarray = np.empty(g.shape, bool)
     _vk.candidates_kernel(
         dem.elevation, float(g.x_min), float(g.y_max), float(g.cell_m), c[0], c[1], c[2],
         th, curv, float(max_range_m), cand,

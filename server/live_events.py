@@ -44,14 +44,13 @@ from demtrack.core.activity import (
 )
 from demtrack.core.handoff import predict_handoff
 from demtrack.core.site import Site
+from demtrack.core.target_heights import target_height_for
 from demtrack.core.tracking.types import Track
 
-__all__ = ["INTERVAL_KINDS", "LiveEventParams", "LiveEvents", "Window", "TARGET_HEIGHT_M"]
+__all__ = ["INTERVAL_KINDS", "LiveEventParams", "LiveEvents", "Window"]
 
 #: Kinds that last a while (deduplicated as episodes).
 INTERVAL_KINDS = ("loitering", "rendezvous", "convoy")
-#: Standing height of each class for hand-off visibility (m).
-TARGET_HEIGHT_M = {"vehicle": 1.5, "human": 1.7}
 
 
 @dataclass(frozen=True)
@@ -269,7 +268,7 @@ class LiveEvents:
                 last.p_enu,
                 v,
                 current=current if current in self.site.sensors else None,
-                height_m=TARGET_HEIGHT_M.get(tr.cls, 1.5),
+                height_m=target_height_for(tr.cls),
                 horizon_s=prm.handoff_horizon_s,
                 dt_s=prm.handoff_dt_s,
                 roads=self.site.roads if tr.cls == "vehicle" else None,

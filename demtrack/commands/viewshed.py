@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from demtrack.core.site import load_site
+from demtrack.core.target_heights import DEFAULT_TARGET_HEIGHT_M
 from demtrack.core.visibility import blind_spots, viewshed
 
 from .common import add_site_argument
@@ -108,9 +109,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--target-height",
         type=float,
-        default=1.0,
+        default=DEFAULT_TARGET_HEIGHT_M,
         metavar="M",
-        help="target point above the surface (default 1 m)",
+        help=(
+            f"target point above the surface (default {DEFAULT_TARGET_HEIGHT_M:g} m, a person;"
+            " a car is 1.5 m)"
+        ),
     )
     p.add_argument("--max-range", type=float, default=1000.0, metavar="M")
     p.add_argument(

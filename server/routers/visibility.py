@@ -17,6 +17,7 @@ from fastapi import APIRouter, Query, Response
 from starlette.concurrency import run_in_threadpool
 
 from demtrack.core.site import Sensor
+from demtrack.core.target_heights import DEFAULT_TARGET_HEIGHT_M
 from demtrack.core.visibility import blind_spots, viewshed
 
 from ..imagery import png_bytes
@@ -153,7 +154,7 @@ def _to_lonlat(state: ConsoleState, polys: list[Any]) -> list[Any]:
 async def sensor_viewshed(
     sensor_id: str,
     state: StateDep,
-    target_height_m: TargetHeight = 1.7,
+    target_height_m: TargetHeight = DEFAULT_TARGET_HEIGHT_M,
     max_range_m: MaxRange = 1000.0,
     mode: Mode = "fov",
     frame: Literal["lonlat", "enu"] = Query(
@@ -220,7 +221,7 @@ def coverage_rgba(count: np.ndarray) -> np.ndarray:
 )
 async def coverage_png(
     state: StateDep,
-    target_height_m: TargetHeight = 1.7,
+    target_height_m: TargetHeight = DEFAULT_TARGET_HEIGHT_M,
     max_range_m: MaxRange = 1000.0,
     mode: Mode = "fov",
 ) -> Response:
@@ -242,7 +243,7 @@ async def coverage_png(
 @router.get("/api/site/coverage.json", summary="Coverage per sensor and blind spots")
 async def coverage_json(
     state: StateDep,
-    target_height_m: TargetHeight = 1.7,
+    target_height_m: TargetHeight = DEFAULT_TARGET_HEIGHT_M,
     max_range_m: MaxRange = 1000.0,
     mode: Mode = "fov",
     min_area_m2: float = Query(
