@@ -194,16 +194,21 @@ class HandoffScore:
     correct : int
         Of those, how many the prediction made ``lead_s`` before the exit named right.
     lead_s : float
-        How long before the real exit the predictions were made.
-    early_s : list of float
-        For each correct hand-off, how long before the exit the prediction first named the
-        right camera (within the horizon).
+        How long before the real exit the predictions were made (at most: see ``leads_s``).
+    early_s : tuple of float
+        For each hand-off predicted right at some time, how long before the exit the
+        prediction first named the right camera (within the horizon).
+    leads_s : tuple of float
+        For each hand-off, how long before the exit its scored prediction was made:
+        ``lead_s``, or less when the current camera took the target over later than that
+        (it cannot predict before it holds the target).
     """
 
     handoffs: int
     correct: int
     lead_s: float
     early_s: tuple[float, ...]
+    leads_s: tuple[float, ...] = ()
 
     @property
     def accuracy(self) -> float:
@@ -227,12 +232,14 @@ def evaluate_handoffs(
 
     The truth is resampled every ``dt_s``. The camera holding the target keeps it while it
     sees at least ``min_fraction`` of it; when it loses it, the camera that sees most of it
-    then (or first afterwards) takes over. At each such hand-off, predictions made ``lead_s``
-    before it (with the truth's velocity, and ``roads`` if given) are compared with the
-    camera that really took the target.
+    then (or first afterwards) takes over. At each such hand-off, the prediction made
+    ``lead_s`` before it (with the truth's velocity, and ``roads`` if given) - or, when the
+    current camera took the target over less than ``lead_s`` before, the first one it could
+    make - is compared with the camera that really took the target.
     """
     handoffs = correct = 0
     early: list[float] = []
+    leads: list[float] = []
     for truth in truths:
         t = np.arange(truth.t_s[0], truth.t_s[-1], dt_s)
         p = truth.at(t)
@@ -261,10 +268,15 @@ def evaluate_handoffs(
             if nxt == current:
                 continue  # lost and found again by the same camera: a gap, not a hand-off
             handoffs += 1
+            # The prediction is made lead_s before the exit, or as soon as the current
+            # camera holds the target when it took it over less than lead_s before.
+            held = i - 1
+            while held > 0 and seen[held - 1, current]:
+                held -= 1
+            k_lead = max(held, i - int(round(lead_s / dt_s)))
+            leads.append(float(t[i] - t[k_lead]))
             first_right = None
-            for k in range(max(0, i - int(horizon_s / dt_s)), i):
-                if not seen[k, current]:
-                    continue
+            for k in range(max(held, i - int(horizon_s / dt_s)), i):
                 pred = predict_handoff(
                     dem, sensors, p[k], v[k], current=ids[current], height_m=height_m,
                     horizon_s=horizon_s, dt_s=dt_s, min_fraction=min_fraction, roads=roads,
@@ -272,9 +284,9 @@ def evaluate_handoffs(
                 right = pred.next_sensor == ids[nxt]
                 if right and first_right is None:
                     first_right = t[i] - t[k]
-                if right and abs((t[i] - t[k]) - lead_s) < dt_s / 2:
+                if right and k == k_lead:
                     correct += 1
             if first_right is not None:
                 early.append(float(first_right))
             current = nxt if seen[i, nxt] else -1
-    return HandoffScore(handoffs, correct, lead_s, tuple(early))
+    return HandoffScore(handoffs, correct, lead_s, tuple(early), tuple(leads))

@@ -73,3 +73,22 @@ def test_evaluation_counts_the_truth_handoff_and_scores_it():
     score = evaluate_handoffs(dem, cams, [truth], height_m=1.7)
     assert score.handoffs == 1 and score.correct == 1 and score.accuracy == 1.0
     assert score.early_s[0] >= 2.0
+    assert score.leads_s == pytest.approx((2.0,))
+
+
+def test_a_handoff_soon_after_takeover_is_scored_from_the_takeover():
+    # The walker appears in A's view about 1 s before it leaves it: nobody could predict the
+    # hand-off 2 s ahead, so the scored prediction is the first one A can make.
+    dem, cams = flat(), two_cameras()
+    exit_in = predict_handoff(
+        dem, cams, np.array([-40.0, 0.0, 0.0]), np.array([4.0, 0.0, 0.0]), height_m=1.7
+    ).exit_in_s
+    x_exit = -40.0 + 4.0 * exit_in
+    t = np.arange(0.0, 20.0, 0.1)
+    truth = TruthPath(
+        1, "human", t, np.column_stack([x_exit - 4.0 + 4.0 * t, np.zeros_like(t), np.zeros_like(t)])
+    )
+    score = evaluate_handoffs(dem, cams, [truth], height_m=1.7, lead_s=2.0)
+    assert score.handoffs == 1 and score.correct == 1
+    assert 0.0 < score.leads_s[0] < 2.0
+    assert score.leads_s[0] == pytest.approx(1.0, abs=0.6)
