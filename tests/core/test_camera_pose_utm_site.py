@@ -17,6 +17,7 @@ import pytest
 import rasterio
 from affine import Affine
 from pyproj import Geod, Transformer
+from wgs84_twin import enu, r_enu_ecef
 
 from demtrack.core.camera import Camera, Intrinsics
 from demtrack.core.camera_pose import check_camera_on_dem, pose_from_survey, true_azimuth_deg
@@ -31,37 +32,9 @@ ANCHOR = (40.3573, -79.6208, 300.0)
 UTM = "EPSG:32617"
 N_GEOID = -33.5
 
-_A = 6378137.0
-_F = 1.0 / 298.257223563
-_E2 = _F * (2.0 - _F)
-
-
-def _ecef(lat_deg, lon_deg, h_m):
-    lat, lon = np.radians(lat_deg), np.radians(lon_deg)
-    n = _A / np.sqrt(1.0 - _E2 * np.sin(lat) ** 2)
-    return np.stack(
-        [
-            (n + h_m) * np.cos(lat) * np.cos(lon),
-            (n + h_m) * np.cos(lat) * np.sin(lon),
-            (n * (1.0 - _E2) + h_m) * np.sin(lat),
-        ]
-    )
-
-
-def _r_enu_ecef(lat_deg, lon_deg):
-    p, lam = np.radians(lat_deg), np.radians(lon_deg)
-    return np.array(
-        [
-            [-np.sin(lam), np.cos(lam), 0.0],
-            [-np.sin(p) * np.cos(lam), -np.sin(p) * np.sin(lam), np.cos(p)],
-            [np.cos(p) * np.cos(lam), np.cos(p) * np.sin(lam), np.sin(p)],
-        ]
-    )
-
 
 def _enu(lat_deg, lon_deg, h_m):
-    d = _ecef(lat_deg, lon_deg, h_m) - _ecef(*ANCHOR).reshape((3,) + (1,) * np.ndim(lat_deg))
-    return np.tensordot(_r_enu_ecef(*ANCHOR[:2]), d, axes=1)
+    return enu(lat_deg, lon_deg, h_m, ANCHOR)
 
 
 def terrain(e, n):
@@ -113,7 +86,7 @@ def _survey(frame):
     lat, lon, h = frame.to_geodetic(*P_CAM)
     x, y = Transformer.from_crs("EPSG:4326", UTM, always_xy=True).transform(lon, lat)
     # Orientation as seen in the camera's own east-north-up frame (independent twin).
-    r_local = _r_enu_ecef(lat, lon) @ _r_enu_ecef(*ANCHOR[:2]).T @ cam.R_world_cam
+    r_local = r_enu_ecef(lat, lon) @ r_enu_ecef(*ANCHOR[:2]).T @ cam.R_world_cam
     az_true, tilt, roll = Camera(INTR, P_CAM, r_local).azimuth_tilt_roll_deg()
     # Grid azimuth: a point 1 m along the true azimuth, both projected to UTM (a short
     # line, so that the arc-to-chord correction is negligible: 4e-6 deg at 50 m).

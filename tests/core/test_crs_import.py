@@ -14,6 +14,7 @@ import pytest
 import rasterio
 from affine import Affine
 from pyproj import CRS, Transformer
+from wgs84_twin import enu
 
 from demtrack.core.crs_import import (
     bilinear_at_centres,
@@ -31,35 +32,9 @@ from demtrack.core.grid import GridSpec
 BUSHY_RUN = (40.3573, -79.6208, 300.0)
 FTUS = 1200.0 / 3937.0
 
-# WGS84 twin (NIMA TR8350.2 constants), independent of demtrack.core.geodesy.
-_A = 6378137.0
-_F = 1.0 / 298.257223563
-_E2 = _F * (2.0 - _F)
-
-
-def _ecef(lat_deg, lon_deg, h_m):
-    lat, lon = np.radians(lat_deg), np.radians(lon_deg)
-    n = _A / np.sqrt(1.0 - _E2 * np.sin(lat) ** 2)
-    return np.stack(
-        [
-            (n + h_m) * np.cos(lat) * np.cos(lon),
-            (n + h_m) * np.cos(lat) * np.sin(lon),
-            (n * (1.0 - _E2) + h_m) * np.sin(lat),
-        ]
-    )
-
 
 def _enu(lat_deg, lon_deg, h_m, anchor=BUSHY_RUN):
-    p, lam = np.radians(anchor[0]), np.radians(anchor[1])
-    r = np.array(
-        [
-            [-np.sin(lam), np.cos(lam), 0.0],
-            [-np.sin(p) * np.cos(lam), -np.sin(p) * np.sin(lam), np.cos(p)],
-            [np.cos(p) * np.cos(lam), np.cos(p) * np.sin(lam), np.sin(p)],
-        ]
-    )
-    d = _ecef(lat_deg, lon_deg, h_m) - _ecef(*anchor).reshape((3,) + (1,) * np.ndim(lat_deg))
-    return np.tensordot(r, d, axes=1)
+    return enu(lat_deg, lon_deg, h_m, anchor)
 
 
 def terrain(e, n):
