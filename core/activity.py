@@ -168,7 +168,7 @@ def detect_loitering(
             best_end[i] = j
         qualifies = t[best_end] - t >= params.min_duration_s
         covered = np.zeros(n, bool)
-        for i in np.flatnonzero(qualifies):
+        for i in np.flatnonzero(qualifies).tolist():
             covered[i : best_end[i] + 1] = True
         for a, b in _runs(covered):
             w = p[a:b]

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -28,6 +28,10 @@ __all__ = ["Dem", "VERTICAL_DATUM_LOCAL"]
 
 #: The vertical datum of every elevation stored by a site DEM.
 VERTICAL_DATUM_LOCAL = "local-frame Z: up along the WGS84 ellipsoid normal at the site anchor"
+
+# Default of the optional per-cell arrays: omitted at construction, ``__post_init__``
+# replaces it with zeros, so on a built Dem the attribute is always an ndarray.
+_FILLED_BY_POST_INIT = cast("np.ndarray", None)
 
 
 @dataclass(frozen=True, eq=False)
@@ -56,9 +60,9 @@ class Dem:
 
     grid: GridSpec
     elevation: np.ndarray
-    variance: np.ndarray = field(default=None)  # type: ignore[assignment]
-    count: np.ndarray = field(default=None)  # type: ignore[assignment]
-    filled: np.ndarray = field(default=None)  # type: ignore[assignment]
+    variance: np.ndarray = field(default=_FILLED_BY_POST_INIT)
+    count: np.ndarray = field(default=_FILLED_BY_POST_INIT)
+    filled: np.ndarray = field(default=_FILLED_BY_POST_INIT)
     crs_wkt: str | None = None
     vertical_datum: str = VERTICAL_DATUM_LOCAL
 
@@ -159,7 +163,8 @@ class Dem:
                 float(x0), float(y0 + nrows * cell_size), float(cell_size), nrows, ncols
             )
         else:
-            grid = GridSpec.covering(*map(float, bounds), float(cell_size))
+            bx0, by0, bx1, by1 = (float(b) for b in bounds)
+            grid = GridSpec.covering(bx0, by0, bx1, by1, float(cell_size))
         rows, cols = grid.cell_of(pts[:, 0], pts[:, 1])
         keep = rows >= 0
         flat = rows[keep] * grid.ncols + cols[keep]
@@ -170,17 +175,16 @@ class Dem:
         with np.errstate(invalid="ignore", divide="ignore"):
             mean = total / count
         dev = z - mean[flat]
-        variance = np.bincount(flat, weights=dev * dev, minlength=n)
+        sq_dev = np.bincount(flat, weights=dev * dev, minlength=n)
         with np.errstate(invalid="ignore", divide="ignore"):
-            variance = variance / count
+            variance = sq_dev / count
         shape = grid.shape
         return cls(
             grid,
             mean.reshape(shape),
             variance.reshape(shape),
             count.reshape(shape).astype(np.int32),
-            None,
-            crs_wkt,
+            crs_wkt=crs_wkt,
         )
 
     def fill_holes(self, coarse: Dem, coarse_sigma_m: float = 1.0) -> Dem:

@@ -146,7 +146,8 @@ def raster_outline_lonlat(info: RasterInfo, n: int = 33) -> tuple[np.ndarray, np
     rs = r_lo + (r_hi - r_lo) * t
     col = np.concatenate([cs, np.full(n, c_hi), cs[::-1], np.full(n, c_lo)])
     row = np.concatenate([np.full(n, r_lo), rs, np.full(n, r_hi), rs[::-1]])
-    x, y = info.transform @ (col, row)
+    # affine's stubs type only float vectors; at run time it broadcasts over arrays.
+    x, y = info.transform @ (col, row)  # type: ignore[operator]
     hcrs = horizontal_crs(info.crs_wkt)
     lon, lat = cached_transformer(hcrs.to_wkt(), "EPSG:4326").transform(x, y)
     return np.asarray(lon, dtype=np.float64), np.asarray(lat, dtype=np.float64)

@@ -43,7 +43,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import OptimizeResult, least_squares
 
 from .camera import (
     Camera,
@@ -274,7 +274,7 @@ def check_gcps_in_front(camera: Camera, gcps: Sequence[Gcp], sensor_id: str = "c
     p = np.array([g.p_enu for g in gcps])
     d = p - camera.position_enu
     depth = d @ camera.R_world_cam[:, 2]
-    for k in np.flatnonzero(depth <= 0.0):
+    for k in np.flatnonzero(depth <= 0.0).tolist():
         cosang = depth[k] / max(np.linalg.norm(d[k]), 1e-300)
         ang = math.degrees(math.acos(max(-1.0, min(1.0, float(cosang)))))
         raise CalibrationError(
@@ -292,7 +292,7 @@ def _solve(
     uv: np.ndarray,
     loss: str,
     f_scale_px: float,
-) -> tuple[np.ndarray, object]:
+) -> tuple[np.ndarray, OptimizeResult]:
     def resid(q: np.ndarray) -> np.ndarray:
         theta = theta0.copy()
         theta[idx] = q
@@ -440,7 +440,7 @@ def fit_camera_to_gcps(
     notes = []
     if dof <= 0:
         notes.append("no redundancy: as many equations as parameters, residuals prove nothing")
-    for j in np.flatnonzero(outliers):
+    for j in np.flatnonzero(outliers).tolist():
         notes.append(
             f"GCP {names[j]!r}: residual {norms[j]:.1f} px exceeds {threshold:.1f} px"
             + ("; excluded from the fit" if not used[j] else "; kept (too few GCPs to drop it)")

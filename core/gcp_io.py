@@ -123,7 +123,8 @@ def read_gcp_csv(path: str | Path) -> GcpFile:
         )
     idx = {c: header.index(c) for c in _REQUIRED}
     i_name = header.index("name") if "name" in header else None
-    names, values = [], []
+    names: list[str] = []
+    values: list[list[float]] = []
     for k, row in enumerate(rows[1:], start=2):
         try:
             vals = [float(row[idx[c]]) for c in _REQUIRED]

@@ -85,7 +85,7 @@ def pyramid_level_shapes(nrows: int, ncols: int) -> np.ndarray:
     if nrows < 2 or ncols < 2:
         raise DemError(f"a surface needs at least 2 x 2 cells, got {nrows} x {ncols}")
     r, c = nrows - 1, ncols - 1
-    shapes = []
+    shapes: list[tuple[int, int]] = []
     while not shapes or shapes[-1] != (1, 1):
         r, c = (r + 1) // 2, (c + 1) // 2
         shapes.append((r, c))

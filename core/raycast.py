@@ -324,6 +324,7 @@ class RayCaster:
                 # Runs of one origin use its angular index; the rays between them take the
                 # pyramid walk (the same kernel with no azimuth bin built).
                 a = 0
+                ix: AngularIndex | SimpleNamespace
                 for r0, r1 in runs.tolist() + [[n, n]]:
                     if a < r0:
                         ix = _no_index()
@@ -367,7 +368,9 @@ def _threads_for(n: int) -> Iterator[None]:
         numba.set_num_threads(threads)
 
 
-def _index_args(ix: Any) -> tuple:
+def _index_args(
+    ix: AngularIndex | SimpleNamespace,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, np.ndarray, float]:
     return (ix.tree, ix.t_off, ix.t_size, ix.slot_of_az, ix.d_rho, ix.start, ix.s_unit)
 
 

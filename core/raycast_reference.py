@@ -78,9 +78,9 @@ def _one_ray(
     cap: int,
 ) -> tuple[list[float], bool]:
     nrows, ncols = e.shape
-    jj, ii = np.meshgrid(np.arange(ncols - 1), np.arange(nrows - 1))
-    jj = jj.ravel()
-    ii = ii.ravel()
+    jgrid, igrid = np.meshgrid(np.arange(ncols - 1), np.arange(nrows - 1))
+    jj = jgrid.ravel()
+    ii = igrid.ravel()
     xlo, xhi = _slab(gx0, kx, jj.astype(float), jj + 1.0)
     ylo, yhi = _slab(gy0, ky, ii.astype(float), ii + 1.0)
     lo = np.maximum(np.maximum(xlo, ylo), t_a)
@@ -234,8 +234,8 @@ def angular_leaves_reference(
 
     e = np.asarray(elevation, np.float32)
     nrows, ncols = e.shape
-    ii, jj = np.meshgrid(np.arange(nrows - 1), np.arange(ncols - 1), indexing="ij")
-    ii, jj = ii.ravel(), jj.ravel()
+    igrid, jgrid = np.meshgrid(np.arange(nrows - 1), np.arange(ncols - 1), indexing="ij")
+    ii, jj = igrid.ravel(), jgrid.ravel()
     corners = np.stack([e[ii, jj], e[ii, jj + 1], e[ii + 1, jj], e[ii + 1, jj + 1]])
     hole = np.isnan(corners).any(axis=0)
     hi = np.where(hole, np.inf, np.nanmax(np.where(hole, 0, corners), axis=0))

@@ -276,7 +276,9 @@ def read_road_lines(path: str | Path, *, crs: Any = None, layer: str | None = No
     except DemtrackError as exc:
         raise CrsError(f"road file {path}: {exc}") from None
     to_ll = cached_transformer(hcrs.to_wkt(), "EPSG:4326")
-    lonlat, names, widths = [], [], []
+    lonlat: list[np.ndarray] = []
+    names: list[str] = []
+    widths: list[float] = []
     for k, (geom, prop) in enumerate(zip(geoms, props, strict=True)):
         for xy in _parts(geom, k):
             if len(xy) < 2 or not np.isfinite(xy[:, :2]).all():

@@ -29,7 +29,7 @@ __all__ = [
 ]
 
 
-def write_atomic(path: str | Path, write: Callable[[Path], None]) -> None:
+def write_atomic(path: str | Path, write: Callable[[Path], object]) -> None:
     """Call ``write(tmp)`` for a temporary path beside ``path``, then move it over ``path``.
 
     Raises whatever ``write`` raises, after removing the temporary file.

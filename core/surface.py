@@ -7,11 +7,12 @@ the surface that is sampled is exactly the surface that rays hit.
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = ["bilinear_sample"]
 
 
-def bilinear_sample(values: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
+def bilinear_sample(values: np.ndarray, gx: ArrayLike, gy: ArrayLike) -> np.ndarray:
     """Bilinear interpolation of a grid of cell-centre values.
 
     Parameters

@@ -20,7 +20,7 @@ import shapely
 from shapely import LineString, Polygon
 
 from ..errors import TrackingError
-from .types import Fix, TruthPath
+from .types import Fix, ObjectClass, TruthPath
 
 __all__ = [
     "NoiseModel",
@@ -140,7 +140,7 @@ def ellipse_road(
 
 def truth_along_line(
     target_id: int,
-    cls: str,
+    cls: ObjectClass,
     line: LineString,
     speed_m_s: float,
     t_start_s: float,
@@ -177,7 +177,7 @@ def truth_along_line(
     tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
     normal = np.column_stack([-tangent[:, 1], tangent[:, 0]])
     xy = centre + offset_m * normal
-    return TruthPath(target_id, cls, t, np.column_stack([xy, np.zeros(len(t))]))  # type: ignore[arg-type]
+    return TruthPath(target_id, cls, t, np.column_stack([xy, np.zeros(len(t))]))
 
 
 def _perpendiculars(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -191,7 +191,7 @@ def _fix_for_point(
     p_true: np.ndarray,
     sensor: SyntheticSensor,
     t: float,
-    cls: str,
+    cls: ObjectClass,
     index: int,
     noise: NoiseModel,
     rng: np.random.Generator,
@@ -223,7 +223,7 @@ def _fix_for_point(
         t_s=t,
         sensor=sensor.name,
         cls=cls,
-        detection_index=index,  # type: ignore[arg-type]
+        detection_index=index,
         origin_enu=origin,
         direction_enu=d,
         hits_enu=np.array(hits),
@@ -287,7 +287,7 @@ def simulate(
             p = np.array([rng.uniform(x0, x1), rng.uniform(y0, y1), 0.0])
             if sensor.coverage is not None and not sensor.coverage.contains(shapely.Point(p[:2])):
                 continue
-            cls = "vehicle" if rng.random() < 0.5 else "human"
+            cls: ObjectClass = "vehicle" if rng.random() < 0.5 else "human"
             fix = _fix_for_point(p, sensor, t, cls, len(fixes), noise, rng, False)
             if fix is not None:
                 fixes.append(fix)

@@ -200,7 +200,9 @@ class World:
     def in_parking(self, x: ArrayLike, y: ArrayLike) -> np.ndarray:
         """Tell whether each point lies on the parking lot's paved area."""
         px0, px1, py0, py1 = PARKING
-        return (x >= px0) & (x <= px1) & (y >= py0) & (y <= py1)
+        xa = np.asarray(x, dtype=np.float64)
+        ya = np.asarray(y, dtype=np.float64)
+        return (xa >= px0) & (xa <= px1) & (ya >= py0) & (ya <= py1)
 
 
 def make_world(seed: int = 7) -> World:
