@@ -9,6 +9,13 @@ publisher is fanned out to :meth:`Scene3D.publish`): for each new fix its viewin
 with every terrain hit marked (the newest ``max_rays`` rays are kept), the hit the
 tracker used highlighted, and each track as a coloured polyline.
 
+**Following a track.** :meth:`Scene3D.follow` (``PUT /api/scene3d/follow``, sent by the
+console when the operator selects a track) points every client's camera at the track's
+newest position and keeps it there as new points arrive: the camera keeps its offset from
+the look-at point (so an operator who orbits or zooms keeps that view), starting from
+:data:`FOLLOW_OFFSET_M` behind the track's recent heading. The followed track is drawn
+thick and yellow with a marker and its id at the head; ``follow(None)`` stops.
+
 Everything is in the site frame (x east, y north, z up, m), which is viser's default
 ``+z`` up world. viser's frustums follow the OpenCV camera convention (x right, y down,
 z forward), the same as ``R_world_cam``, so a frustum's orientation is ``R_world_cam``
@@ -34,7 +41,9 @@ from demtrack.core.grid import GridSpec
 from demtrack.core.site import Site
 
 __all__ = [
+    "FOLLOW_OFFSET_M",
     "Scene3D",
+    "follow_offset",
     "TerrainMesh",
     "display_host",
     "frustum_fov_aspect",
@@ -66,6 +75,10 @@ _PALETTE = np.array(
 _SENSOR_COLOURS = [(255, 215, 0), (0, 200, 255), (255, 105, 180), (160, 255, 120)]
 _LIFT_M = 0.4  # draw lines this far above the terrain so the mesh does not swallow them
 _MAX_TRACKS = 40
+_FOLLOW_COLOUR = (255, 230, 0)  # the console's selection colour
+#: Where a camera starts when it begins to follow: this far behind the track (m,
+#: horizontally) and this far above its newest point.
+FOLLOW_OFFSET_M = (60.0, 35.0)
 
 
 def wxyz_from_matrix(R: np.ndarray) -> np.ndarray:  # noqa: N803 - a rotation matrix is R
@@ -218,6 +231,36 @@ def track_colour(track_id: int) -> tuple[int, int, int]:
     return int(c[0]), int(c[1]), int(c[2])
 
 
+def follow_offset(
+    points: np.ndarray, back_m: float = FOLLOW_OFFSET_M[0], up_m: float = FOLLOW_OFFSET_M[1]
+) -> np.ndarray:
+    """A camera offset from a track's newest point: behind its recent heading, above it.
+
+    Parameters
+    ----------
+    points : ndarray, shape (k, 3)
+        The track's points in time order, site frame (m).
+    back_m, up_m : float
+        Horizontal distance behind and height above the newest point (m).
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        ``camera position - look_at`` (site frame, m). The heading is that of the last
+        point at least 2 m (horizontally) before the newest; a track that has not moved
+        that far is looked at from the south.
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    heading = np.array([0.0, 1.0])
+    if len(p) >= 2:
+        d = p[-1, :2] - p[:-1, :2]
+        far = np.flatnonzero(np.hypot(d[:, 0], d[:, 1]) >= 2.0)
+        if len(far):
+            v = d[far[-1]]
+            heading = v / np.hypot(v[0], v[1])
+    return np.array([-back_m * heading[0], -back_m * heading[1], up_m])
+
+
 def display_host(host: str) -> str:
     """The host to put in URLs for a bind address (a wildcard becomes 127.0.0.1)."""
     if host in ("", "0.0.0.0", "::", "[::]"):
@@ -304,6 +347,11 @@ class Scene3D:
         self._tracks: dict[int, _Track] = {}
         self._dirty_rays = False
         self._dirty_tracks: set[int] = set()
+        self._follow: int | None = None
+        self._follow_target: np.ndarray | None = None  # look-at point last aimed at
+        self._follow_offset: np.ndarray | None = None  # for cameras that start following
+        self._aim_lock = threading.Lock()
+        self.server.on_client_connect(self._on_client_connect)
         self._thread = threading.Thread(target=self._run, name="demtrack-scene3d", daemon=True)
         self._thread.start()
 
@@ -317,6 +365,47 @@ class Scene3D:
                     self.n_dropped += 1
                 self._inbox.append(m)
         self._wake.set()
+
+    def follow(self, track_id: int | None, track: dict[str, Any] | None = None) -> None:
+        """Follow a track with every client's camera (``None`` stops following).
+
+        Parameters
+        ----------
+        track_id : int or None
+        track : dict, optional
+            The track's body as ``/api/tracks`` gives it (all points), for a track this
+            scene has not been sent yet (it only sees the stream since it started).
+            Later ``track_update`` messages keep it current.
+        """
+        self._inbox.append({"type": "_follow", "track_id": track_id, "track": track})
+        self._wake.set()
+
+    def follow_state(self) -> dict[str, Any]:
+        """The followed track, the point the cameras look at, and each client's camera.
+
+        Returns
+        -------
+        dict
+            ``track_id`` (or None), ``look_at_enu`` (the followed track's newest point, site
+            frame m, or None before it has one), ``clients``: ``[{id, look_at_enu,
+            position_enu}]`` as each connected viser client last reported or was sent.
+        """
+        target = self._follow_target
+        clients = []
+        for cid, client in sorted(self.server.get_clients().items()):
+            cam = client.camera
+            clients.append(
+                {
+                    "id": int(cid),
+                    "look_at_enu": [float(x) for x in cam.look_at],
+                    "position_enu": [float(x) for x in cam.position],
+                }
+            )
+        return {
+            "track_id": self._follow,
+            "look_at_enu": None if target is None else [float(x) for x in target],
+            "clients": clients,
+        }
 
     def wait_ready(self, timeout_s: float | None = None) -> bool:
         """Wait until the static scene (terrain, cameras, roads) is built."""
@@ -400,10 +489,10 @@ class Scene3D:
         if sensor.image_path is not None and sensor.image_path.is_file():
             from PIL import Image
 
-            with Image.open(sensor.image_path) as im:
-                im = im.convert("RGB")
-                im.thumbnail((480, 480))
-                image = np.asarray(im)
+            with Image.open(sensor.image_path) as raw:
+                rgb = raw.convert("RGB")
+                rgb.thumbnail((480, 480))
+                image = np.asarray(rgb)
         name = f"/cameras/{sensor.id}"
         self._add(
             name,
@@ -417,7 +506,7 @@ class Scene3D:
                 color=colour,
                 image=image,
                 wxyz=wxyz_from_matrix(camera.R_world_cam),
-                position=tuple(float(x) for x in camera.position_enu),
+                position=np.asarray(camera.position_enu, dtype=np.float64),
             ),
         )
         label = f"/labels/{sensor.id}"
@@ -426,7 +515,7 @@ class Scene3D:
             scene.add_label(
                 label,
                 f"{sensor.id} ({sensor.name})",
-                position=tuple(float(x) for x in camera.position_enu + [0.0, 0.0, 3.0]),
+                position=np.asarray(camera.position_enu, dtype=np.float64) + [0.0, 0.0, 3.0],
             ),
         )
 
@@ -459,6 +548,8 @@ class Scene3D:
                 self._on_fix(m["fix"])
             elif kind == "track_update":
                 self._on_track(m["track"])
+            elif kind == "_follow":
+                self._on_follow(m["track_id"], m.get("track"))
             elif kind == "_flush":
                 flushes.append(m["event"])
             self.n_messages += 1
@@ -506,6 +597,80 @@ class Scene3D:
                     q = np.array([p["e_m"], p["n_m"], p["u_m"]])
                     ray.chosen = int(np.argmin(np.linalg.norm(ray.hits - q, axis=1)))
                     self._dirty_rays = True
+
+    def _on_follow(self, track_id: int | None, body: dict[str, Any] | None) -> None:
+        old = self._follow
+        if old is not None:
+            self._dirty_tracks.add(old)  # back to its own colour
+        self._follow = None if track_id is None else int(track_id)
+        self._follow_target = None
+        self._follow_offset = None
+        if self._follow is None:
+            for name in ("/follow/head", "/follow/label"):
+                handle = self.nodes.pop(name, None)
+                if handle is not None:
+                    handle.remove()
+            return
+        known = self._tracks.get(self._follow)
+        if body is not None and int(body["id"]) == self._follow:
+            n = len(body.get("points") or [])
+            if known is None or n > len(known.points):
+                self._on_track({**body, "first_index": 0})
+        self._dirty_tracks.add(self._follow)
+
+    def _followed_points(self) -> np.ndarray | None:
+        tr = None if self._follow is None else self._tracks.get(self._follow)
+        if tr is None or not tr.points:
+            return None
+        return np.asarray(tr.points, dtype=np.float64)
+
+    def _aim(
+        self, clients: list[Any], target: np.ndarray, start: np.ndarray, keep_offset: bool
+    ) -> None:
+        """Point ``clients``' cameras at ``target`` from their own offset or from ``start``."""
+        with self._aim_lock:
+            for client in clients:
+                cam = client.camera
+                try:
+                    offset = np.asarray(cam.position) - np.asarray(cam.look_at)
+                    if not keep_offset or not np.all(np.isfinite(offset)) or not offset.any():
+                        offset = start
+                    with client.atomic():
+                        cam.up_direction = (0.0, 0.0, 1.0)
+                        cam.position = tuple(float(x) for x in target + offset)
+                        cam.look_at = tuple(float(x) for x in target)
+                except Exception:  # noqa: BLE001 - a client that left meanwhile
+                    log.debug("could not move client %s's camera", client.client_id)
+
+    def _on_client_connect(self, client: Any) -> None:
+        """A client that connects while a track is followed starts by looking at it."""
+        target, start = self._follow_target, self._follow_offset
+        if target is not None and start is not None:
+            self._aim([client], target, start, keep_offset=False)
+
+    def _update_follow(self) -> None:
+        pts = self._followed_points()
+        if pts is None:
+            return
+        target = pts[-1] + [0.0, 0.0, _LIFT_M]
+        first = self._follow_offset is None
+        if not first and self._follow_target is not None:
+            if np.allclose(target, self._follow_target):
+                return
+        start = follow_offset(pts) if first else self._follow_offset
+        assert start is not None  # set on the first aim, kept until the next follow()
+        self._follow_offset = start
+        self._follow_target = target
+        scene = self.server.scene
+        self._add(
+            "/follow/head",
+            scene.add_icosphere("/follow/head", radius=1.2, color=_FOLLOW_COLOUR, position=target),
+        )
+        self._add(
+            "/follow/label",
+            scene.add_label("/follow/label", f"#{self._follow}", position=target + [0.0, 0.0, 3.0]),
+        )
+        self._aim(list(self.server.get_clients().values()), target, start, keep_offset=not first)
 
     def _render(self) -> None:
         scene = self.server.scene
@@ -563,22 +728,34 @@ class Scene3D:
                 p = np.asarray(tr.points) + [0.0, 0.0, _LIFT_M]
                 name = f"/tracks/{tid}"
                 colour = track_colour(tid)
+                if tid == self._follow:
+                    colour, thickness = _FOLLOW_COLOUR, 7.0
+                elif tr.live:
+                    thickness = 4.0
+                else:
+                    c_r, c_g, c_b = (int(0.5 * c + 64) for c in colour)
+                    colour, thickness = (c_r, c_g, c_b), 2.0
                 self._add(
                     name,
                     scene.add_line_segments(
                         name,
                         polyline_segments(p),
-                        colour if tr.live else tuple(int(0.5 * c + 64) for c in colour),
-                        thickness=4.0 if tr.live else 2.0,
+                        colour,
+                        thickness=thickness,
                         thickness_units="screen",
                     ),
                 )
             self._dirty_tracks.clear()
+        if self._follow is not None:
+            self._update_follow()
 
     def _prune_tracks(self) -> None:
         if len(self._tracks) <= _MAX_TRACKS:
             return
-        ended = sorted((t for t in self._tracks.values() if not t.live), key=lambda t: t.t_last)
+        ended = sorted(
+            (t for t in self._tracks.values() if not t.live and t.id != self._follow),
+            key=lambda t: t.t_last,
+        )
         for tr in ended[: len(self._tracks) - _MAX_TRACKS]:
             del self._tracks[tr.id]
             self._dirty_tracks.discard(tr.id)

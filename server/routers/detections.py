@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
-from typing import Any
+import math
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, HTTPException, Query
 from starlette.concurrency import run_in_threadpool
 
+from demtrack.core.tracking.types import Detection
+
 from ..models import DetectionBatch, IngestAck, StoredDetectionOut
 from ..security import require_operator, require_reader
-from ..state import StateDep
+from ..state import ConsoleState, StateDep
 
 __all__ = ["router"]
 
@@ -45,8 +48,33 @@ def list_detections(
     state: StateDep,
     after_id: int = Query(0, ge=0, description="only ids above this"),
     limit: int = Query(1000, ge=1, le=10_000),
+    t_from: float | None = Query(
+        None, allow_inf_nan=False, description="only detections at or after this time (s)"
+    ),
+    t_to: float | None = Query(
+        None, allow_inf_nan=False, description="only detections at or before this time (s)"
+    ),
+    sensor: Annotated[
+        list[str] | None, Query(description="only these sensors (repeatable)")
+    ] = None,
 ) -> list[dict[str, Any]]:
-    """Stored detections in arrival (id) order, for paging with ``after_id``."""
+    """Stored detections in arrival (id) order, for paging with ``after_id``.
+
+    With a time window (``t_from`` and/or ``t_to``, session seconds, inclusive) or a
+    ``sensor`` filter they come in time order instead (ties by id): the boxes of a past
+    moment, which the console's camera panels show when the timeline is scrubbed back
+    further than the fixes it holds. ``after_id`` still applies.
+    """
+    if t_from is not None and t_to is not None and t_to < t_from:
+        raise HTTPException(422, f"t_to ({t_to}) is before t_from ({t_from})")
+    if t_from is None and t_to is None and not sensor:
+        rows = state.store.detections(after_id, limit)
+    else:
+        known = state.site.sensors
+        unknown = [s for s in sensor or [] if s not in known]
+        if unknown:
+            raise HTTPException(404, f"unknown sensor {unknown[0]!r}")
+        rows = _in_window(state, t_from, t_to, sorted(set(sensor or known)), after_id, limit)
     return [
         {
             "id": i,
@@ -57,5 +85,29 @@ def list_detections(
             "score": d.score,
             "local_id": d.local_id,
         }
-        for i, d in state.store.detections(after_id, limit)
+        for i, d in rows
     ]
+
+
+def _in_window(
+    state: ConsoleState,
+    t_from: float | None,
+    t_to: float | None,
+    sensors: list[str],
+    after_id: int,
+    limit: int,
+) -> list[tuple[int, Detection]]:
+    """Detections of ``sensors`` in ``[t_from, t_to]`` by time, then id.
+
+    ``sensor IN (...) AND t_s BETWEEN`` is answered from the ``(sensor, t_s)`` index.
+    """
+    lo = -math.inf if t_from is None else t_from
+    hi = math.inf if t_to is None else t_to
+    marks = ",".join("?" * len(sensors))
+    rows = state.store._rows(  # the store's read connection and lock
+        "SELECT id, t_s, sensor, u_min, v_min, u_max, v_max, cls, score, local_id"
+        f" FROM detections WHERE sensor IN ({marks}) AND t_s >= ? AND t_s <= ? AND id > ?"
+        " ORDER BY t_s, id LIMIT ?",  # noqa: S608  (placeholders only)
+        (*sensors, lo, hi, after_id, limit),
+    )
+    return [(r[0], Detection(r[1], r[2], (r[3], r[4], r[5], r[6]), r[7], r[8], r[9])) for r in rows]

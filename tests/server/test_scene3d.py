@@ -18,11 +18,13 @@ from demtrack.server.messages import FixMessage, TrackUpdateMessage
 from demtrack.server.scene3d import (
     Scene3D,
     display_host,
+    follow_offset,
     frustum_fov_aspect,
     polyline_segments,
     road_polylines,
     terrain_mesh,
     texture_uv,
+    track_colour,
     wxyz_from_matrix,
 )
 
@@ -247,3 +249,197 @@ def test_stop_closes_the_port(site):
     sc.stop()
     with pytest.raises(OSError), socket.create_connection(("127.0.0.1", port), timeout=5):
         pass
+
+
+# ------------------------------------------------------------------------- following
+class FakeViserClient:
+    """A viser client without a browser: it reports a camera and reads what it is sent.
+
+    It speaks viser's own wire protocol (a msgpack ``ViewerCameraMessage`` over the
+    WebSocket, with the ``viser-v<version>`` subprotocol), so the server sees a real
+    client: :meth:`viser.ViserServer.get_clients` lists it once its camera arrived.
+    """
+
+    def __init__(self, port: int) -> None:
+        import threading
+
+        import viser
+        from websockets.sync.client import connect
+
+        self.ws = connect(
+            f"ws://127.0.0.1:{port}",
+            subprotocols=[f"viser-v{viser.__version__}"],  # type: ignore[list-item]
+            max_size=None,
+        )
+        self.n_received = 0
+        threading.Thread(target=self._drain, daemon=True).start()
+
+    def _drain(self) -> None:
+        try:
+            while True:
+                self.ws.recv()
+                self.n_received += 1
+        except Exception:  # noqa: BLE001 - closed
+            return
+
+    def send_camera(self, position, look_at) -> None:
+        import msgspec
+
+        self.ws.send(
+            msgspec.msgpack.encode(
+                {
+                    "type": "ViewerCameraMessage",
+                    "wxyz": [1.0, 0.0, 0.0, 0.0],
+                    "position": [float(x) for x in position],
+                    "fov": 1.0,
+                    "near": 0.1,
+                    "far": 5000.0,
+                    "image_height": 600,
+                    "image_width": 800,
+                    "look_at": [float(x) for x in look_at],
+                    "up_direction": [0.0, 0.0, 1.0],
+                }
+            )
+        )
+
+    def close(self) -> None:
+        self.ws.close()
+
+
+def wait_for(cond, timeout_s: float = 10.0) -> None:
+    import time
+
+    deadline = time.monotonic() + timeout_s
+    while not cond():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.05)
+
+
+def test_follow_offset_is_behind_the_heading_and_above():
+    # Moving east: the camera is due west of the head, up_m above it.
+    pts = np.array([[0.0, 0.0, 5.0], [1.0, 0.0, 5.0], [10.0, 0.0, 5.0], [10.5, 0.0, 5.0]])
+    np.testing.assert_allclose(follow_offset(pts, 60.0, 35.0), [-60.0, 0.0, 35.0])
+    # Heading from the newest point back to the last one at least 2 m away (north-east).
+    pts = np.array([[0.0, 0.0, 0.0], [3.0, 3.0, 0.0], [3.5, 3.5, 0.0]])
+    np.testing.assert_allclose(follow_offset(pts, 10.0, 1.0), [-10 / np.sqrt(2)] * 2 + [1.0])
+    # A track that has not moved 2 m is looked at from the south.
+    np.testing.assert_allclose(follow_offset(np.zeros((3, 3)), 60.0, 35.0), [0.0, -60.0, 35.0])
+
+
+def follow_body(track_id: int, points: list[tuple[float, float, float]]) -> dict:
+    pts = [
+        {
+            "t_s": float(k),
+            "e_m": e,
+            "n_m": n,
+            "u_m": u,
+            "lat_deg": 40.0,
+            "lon_deg": -79.0,
+            "h_m": 300.0,
+            "sensors": ["cam1"],
+            "detection_ids": [1000 + k],
+        }  # fmt: skip
+        for k, (e, n, u) in enumerate(points)
+    ]
+    return {"id": track_id, "cls": "human", "sensors": ["cam1"], "gaps": [], "live": True,
+            "n_points": len(pts), "first_index": 0, "points": pts}  # fmt: skip
+
+
+def test_follow_moves_every_client_camera_to_the_track(scene):
+    lift = np.array([0.0, 0.0, 0.4])
+    a = FakeViserClient(scene.server.get_port())
+    try:
+        a.send_camera(position=(0.0, -200.0, 150.0), look_at=(0.0, 0.0, 0.0))
+        wait_for(lambda: len(scene.server.get_clients()) == 1)
+        # Following a track the scene has never been sent: its body comes with the call.
+        walk = [(20.0 + 4.0 * k, -10.0, 3.0) for k in range(6)]  # eastwards
+        scene.follow(41, follow_body(41, walk))
+        assert scene.flush()
+        head = np.array(walk[-1]) + lift
+        [client] = scene.server.get_clients().values()
+        np.testing.assert_allclose(client.camera.look_at, head, atol=1e-9)
+        np.testing.assert_allclose(client.camera.position - head, follow_offset(np.array(walk)))
+        state = scene.follow_state()
+        assert state["track_id"] == 41
+        np.testing.assert_allclose(state["look_at_enu"], head)
+        np.testing.assert_allclose(state["clients"][0]["look_at_enu"], head)
+        # The followed polyline is highlighted; a marker sits at its head.
+        line = scene.nodes["/tracks/41"]
+        assert np.asarray(line.colors).reshape(-1, 3)[0].tolist() == [255, 230, 0]
+        assert line.thickness == 7.0
+        np.testing.assert_allclose(scene.nodes["/follow/head"].position, head)
+        # The operator orbits (a new camera from the client); new fixes arrive: the camera
+        # follows the new head and keeps the operator's offset.
+        mine = np.array([15.0, 25.0, 40.0])
+        a.send_camera(position=head + mine, look_at=head)
+        wait_for(lambda: np.allclose(client.camera.position, head + mine))
+        more = [(44.0 + 4.0 * k, -10.0 + 2.0 * k, 2.0) for k in range(1, 4)]
+        upd = follow_body(41, walk + more)
+        upd["points"] = upd["points"][len(walk) :]
+        upd["first_index"] = len(walk)
+        scene.publish([TrackUpdateMessage.model_validate(
+            {"type": "track_update", "seq": 1, "track": upd}).model_dump()])  # fmt: skip
+        assert scene.flush()
+        head2 = np.array(more[-1]) + lift
+        np.testing.assert_allclose(client.camera.look_at, head2, atol=1e-9)
+        np.testing.assert_allclose(client.camera.position, head2 + mine, atol=1e-9)
+        # A client that connects while following starts by looking at the head.
+        b = FakeViserClient(scene.server.get_port())
+        try:
+            b.send_camera(position=(0.0, -200.0, 150.0), look_at=(0.0, 0.0, 0.0))
+            wait_for(lambda: len(scene.server.get_clients()) == 2)
+            newer = max(scene.server.get_clients().items())[1]
+            wait_for(lambda: np.allclose(newer.camera.look_at, head2))
+        finally:
+            b.close()
+        # Stopping: the head marker goes, the polyline gets its own colour back, and the
+        # cameras stay where they are.
+        scene.follow(None)
+        assert scene.flush()
+        assert "/follow/head" not in scene.nodes and scene.follow_state()["track_id"] is None
+        line = scene.nodes["/tracks/41"]
+        assert tuple(np.asarray(line.colors).reshape(-1, 3)[0]) == track_colour(41)
+        assert line.thickness == 4.0
+        np.testing.assert_allclose(client.camera.look_at, head2, atol=1e-9)
+    finally:
+        a.close()
+        scene.follow(None)
+
+
+def test_follow_endpoint(client_factory):
+    from server_helpers import AUTH, walk
+
+    plain = client_factory()
+    r = plain.get("/api/scene3d/follow", headers=AUTH)
+    assert r.status_code == 404 and "not running" in r.json()["detail"]
+    c = client_factory(scene3d=True, viser_port=0)
+    r = c.post("/api/detections", json={"detections": walk(n=30)}, headers=AUTH)
+    assert r.status_code == 200
+    [track] = c.get("/api/tracks", headers=AUTH).json()["tracks"]
+    scene = c.app.state.scene3d
+    assert scene.wait_ready(120)
+    viewer = FakeViserClient(scene.server.get_port())
+    try:
+        viewer.send_camera(position=(0.0, -200.0, 150.0), look_at=(0.0, 0.0, 0.0))
+        wait_for(lambda: len(scene.server.get_clients()) == 1)
+        tid = track["id"]
+        assert c.put("/api/scene3d/follow", json={"track_id": tid}).status_code == 401
+        bad = c.put("/api/scene3d/follow", json={"track_id": tid + 99}, headers=AUTH)
+        assert bad.status_code == 404 and f"no track {tid + 99}" in bad.json()["detail"]
+        for body in ({"track_id": -1}, {"track_id": tid, "x": 1}, {}):
+            assert c.put("/api/scene3d/follow", json=body, headers=AUTH).status_code == 422
+        r = c.put("/api/scene3d/follow", json={"track_id": tid}, headers=AUTH)
+        assert r.status_code == 200, r.text
+        last = track["points"][-1]
+        want = [last["e_m"], last["n_m"], last["u_m"] + 0.4]
+        body = r.json()
+        assert body["track_id"] == tid
+        np.testing.assert_allclose(body["look_at_enu"], want, atol=1e-9)
+        [cam] = body["clients"]
+        np.testing.assert_allclose(cam["look_at_enu"], want, atol=1e-9)
+        assert c.get("/api/scene3d/follow", headers=AUTH).json() == body
+        r = c.put("/api/scene3d/follow", json={"track_id": None}, headers=AUTH)
+        assert r.status_code == 200 and r.json()["track_id"] is None
+        assert r.json()["look_at_enu"] is None
+    finally:
+        viewer.close()

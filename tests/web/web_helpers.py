@@ -50,6 +50,7 @@ class Server:
     port: int
     proc: subprocess.Popen | None = None
     log: list[str] = field(default_factory=list)
+    extra_args: tuple[str, ...] = ()  # more `demtrack serve` options, e.g. ("--3d",)
 
     @property
     def url(self) -> str:
@@ -72,6 +73,7 @@ class Server:
                 "--no-warm-up",
                 "--log-level",
                 "warning",
+                *self.extra_args,
             ],
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,

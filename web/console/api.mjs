@@ -64,8 +64,16 @@ export async function getOptionalJSON(path) {
 }
 
 export async function postJSON(path, body) {
+  return sendJSON("POST", path, body);
+}
+
+export async function putJSON(path, body) {
+  return sendJSON("PUT", path, body);
+}
+
+async function sendJSON(method, path, body) {
   const resp = await fetch(path, {
-    method: "POST",
+    method,
     headers: headers({ "Content-Type": "application/json" }),
     body: JSON.stringify(body),
   });

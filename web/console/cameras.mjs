@@ -49,6 +49,7 @@ export class CameraPanel {
   /** Draw the boxes of `fixes` (with their track ids) and the clicked pixel. */
   draw(fixes, trackOf, selectedId) {
     this.lastDraw = [fixes, trackOf, selectedId];
+    this.drawn = []; // {detection_id, bbox, label}: what the panel shows (tests read it)
     const c = this.canvas;
     const g = c.getContext("2d");
     g.clearRect(0, 0, c.width, c.height);
@@ -75,6 +76,7 @@ export class CameraPanel {
       g.strokeStyle = colour;
       g.strokeRect(x, y, w, h);
       const text = tid !== undefined ? `#${tid}` : f.tracked ? "…" : "·";
+      this.drawn.push({ detection_id: f.detection_id, bbox: f.bbox, label: text });
       g.lineWidth = 3;
       g.strokeStyle = "rgba(0,0,0,0.9)";
       g.strokeText(text, x, y - 2);

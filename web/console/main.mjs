@@ -10,11 +10,14 @@ import * as api from "./api.mjs";
 import { BOX_WINDOW_S, CameraPanel } from "./cameras.mjs";
 import { drawSpeed, geoDetail, trackDetail } from "./detail.mjs";
 import { FORMATS, renderMarkers, renderTracks } from "./export.mjs";
+import { SceneFollow } from "./follow.mjs";
+import { bufferCovers, PastBoxes } from "./history.mjs";
 import { SiteMap } from "./map.mjs";
 import { firstT, lastT, positionAt, Store, trackParts } from "./store.mjs";
 import { Stream } from "./stream.mjs";
 import { Timeline } from "./timeline.mjs";
 import { $, classColour, download, el, fmt, fmtT } from "./util.mjs";
+import { VisibilityLayers } from "./visibility.mjs";
 
 const store = new Store();
 const ui = {
@@ -36,6 +39,9 @@ const ui = {
   synopsis: null, // {t0, t1, trajs}
   viserUrl: null,
   loadMs: null,
+  follow3d: new SceneFollow(false), // replaced at start-up when the server runs a 3D scene
+  past: new PastBoxes(), // camera boxes older than the store's recent fixes
+  vis: null, // coverage, viewshed and blind-spot layers (loaded when first shown)
 };
 const timeline = new Timeline(store, () => (ui.dirty = true));
 let stream = null;
@@ -108,6 +114,9 @@ async function boot() {
   $("#site-name").textContent = site.name;
   ui.map = new SiteMap("map", site);
   window.demtrack.map = ui.map;
+  ui.vis = new VisibilityLayers(ui.map, site, sensors);
+  ui.follow3d = new SceneFollow(!!ui.viserUrl, showFollow);
+  ui.past.onLoad = () => (ui.dirty = true);
   buildLayerList();
   buildFilters();
   buildCameras();
@@ -240,7 +249,16 @@ function redraw(t) {
   drawSynopsis(t);
   drawEventsOnMap(t);
   for (const [sid, panel] of ui.cams) {
-    panel.draw(store.fixesNear(sid, t, BOX_WINDOW_S), (d) => store.trackOfDetection(d), ui.selectedId);
+    // Scrubbed back beyond the fixes the store keeps: the boxes of that moment come from
+    // the API (history.mjs); none are drawn while they load.
+    const past = !timeline.live && !bufferCovers(store, sid, t, BOX_WINDOW_S);
+    if (past) {
+      const fixes = ui.past.fixesNear(sid, t, BOX_WINDOW_S);
+      panel.draw(fixes || [], (d) => ui.past.trackOf(d) ?? store.trackOfDetection(d), ui.selectedId);
+    } else {
+      panel.draw(store.fixesNear(sid, t, BOX_WINDOW_S), (d) => store.trackOfDetection(d), ui.selectedId);
+    }
+    panel.root.dataset.boxes = past ? "stored" : "recent";
   }
   if (ui.following && ui.selectedId !== null) {
     const tr = store.tracks.get(ui.selectedId);
@@ -421,6 +439,7 @@ function drawLists(t) {
 function select(id) {
   ui.selectedId = id;
   ui.following = false;
+  ui.follow3d.set(id);
   ui.geo = null;
   for (const p of ui.cams.values()) p.click = null;
   ui.map.drawGeolocation(null);
@@ -434,6 +453,7 @@ function select(id) {
 function clearSelection() {
   ui.selectedId = null;
   ui.following = false;
+  ui.follow3d.set(null);
   ui.geo = null;
   for (const p of ui.cams.values()) p.click = null;
   ui.map.drawGeolocation(null);
@@ -494,6 +514,7 @@ async function geolocate(panel, u, v) {
   const rule = ui.rule;
   ui.selectedId = null;
   ui.following = false;
+  ui.follow3d.set(null);
   for (const p of ui.cams.values()) if (p !== panel) p.click = null;
   panel.click = { u, v, result: null };
   ui.geo = { panel, u, v, rule, result: null, pending: true };
@@ -585,11 +606,15 @@ function buildLayerList() {
     const box = el("input", { type: "checkbox", checked: layer.getVisible(), "data-layer": name, id: `layer-${name}` });
     box.addEventListener("change", () => {
       layer.setVisible(box.checked);
+      if (box.checked) ui.vis.ensure(name); // the visibility layers load when first shown
       ui.dirty = true;
     });
     root.append(el("div", { class: "layer-row" }, box, el("label", { for: `layer-${name}`, text: layer.get("title") })));
+    const controls = ui.vis.controls(name);
     const legend = LEGENDS[name];
-    if (legend) {
+    if (controls) {
+      root.append(controls);
+    } else if (legend) {
       root.append(el("div", { class: "legend" }, ...legend.map(([cls, colour, text]) => {
         const c = colour === "vehicle" || colour === "human" ? classColour(colour) : colour;
         const style = cls.includes("line") || cls.includes("dash") ? `border-color:${c}` : `background:${c}`;
@@ -708,6 +733,16 @@ function wireControls() {
       clearSelection();
     }
   });
+}
+
+/** The 3D view's note: which track its cameras follow (or why they do not). */
+function showFollow({ trackId, pending, error }) {
+  const note = $("#follow-3d");
+  note.classList.toggle("hidden", trackId === null && !error);
+  note.classList.toggle("error", !!error);
+  note.textContent = error
+    ? `3D follow failed: ${error}`
+    : trackId === null ? "" : `3D cameras follow track #${trackId}${pending ? " …" : ""} · Esc stops`;
 }
 
 function showTab(which) {

@@ -84,7 +84,7 @@ export class SiteMap {
     this.relief.set("name", "relief");
     this.relief.set("title", "DEM relief");
 
-    this.coverage = vectorLayer("coverage", "Camera coverage", 2, (f) => this.coverageStyle(f));
+    this.coverage = vectorLayer("coverage", "Camera footprints", 2, (f) => this.coverageStyle(f));
     this.roads = vectorLayer("roads", "Roads", 3, (f, res) => this.roadStyle(f, res));
     this.synopsis = vectorLayer("synopsis", "Trajectories (window)", 4, (f) => this.synopsisStyle(f));
     this.trails = vectorLayer("tracks", "Live tracks", 6, (f) => this.trackStyle(f), {
@@ -116,10 +116,11 @@ export class SiteMap {
     this.view.fit([b[0], b[1], b[2], b[3]], { padding: [10, 10, 10, 10] });
   }
 
-  /** The layers the layer list shows, top first. */
+  /** The layers the layer list shows (those with a title, other modules' too), top first. */
   layerList() {
-    return [this.markers, this.geo, this.events, this.sensors, this.trails, this.synopsis,
-      this.roads, this.coverage, this.relief, this.ortho];
+    return this.map.getLayers().getArray()
+      .filter((l) => l.get("title"))
+      .sort((a, b) => (b.getZIndex() ?? 0) - (a.getZIndex() ?? 0));
   }
 
   setImage(layer, url, bounds) {
