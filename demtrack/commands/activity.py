@@ -5,36 +5,44 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import Any
 
-from demtrack.core.activity import (
-    ConvoyParams,
-    LoiterParams,
-    RendezvousParams,
-    detect_convoys,
-    detect_loitering,
-    detect_rendezvous,
-    detect_zone_crossings,
-)
-from demtrack.core.site import load_site
-from demtrack.core.tracking import METHODS
-from demtrack.core.zone_io import read_zones_geojson
-
+from .choices import DEFAULT_METHOD, TRACKING_METHODS
 from .common import add_site_argument
-from .track import DEFAULT_METHOD, track_detections
 
 __all__ = ["register"]
 
 
+def _given(**values: float | None) -> dict[str, Any]:
+    """The options the user set; the rest keep the detector parameters' own defaults."""
+    return {k: v for k, v in values.items() if v is not None}
+
+
 def _run(args: argparse.Namespace) -> int:
+    from demtrack.core.activity import (
+        ConvoyParams,
+        LoiterParams,
+        RendezvousParams,
+        detect_convoys,
+        detect_loitering,
+        detect_rendezvous,
+        detect_zone_crossings,
+    )
+    from demtrack.core.site import load_site
+    from demtrack.core.zone_io import read_zones_geojson
+
+    from .track import track_detections
+
     site = load_site(args.site)
     zones = read_zones_geojson(args.zones, site.frame) if args.zones else []
     tracks = track_detections(site, args.detections, args.method)
-    loiter = LoiterParams(radius_m=args.loiter_radius, min_duration_s=args.loiter_time)
-    meet = RendezvousParams(distance_m=args.meet_distance, min_duration_s=args.meet_time)
+    loiter = LoiterParams(**_given(radius_m=args.loiter_radius, min_duration_s=args.loiter_time))
+    meet = RendezvousParams(**_given(distance_m=args.meet_distance, min_duration_s=args.meet_time))
+    convoy = ConvoyParams(**_given(min_distance_m=args.convoy_distance))
     events = (
         detect_loitering(tracks, loiter)
         + detect_rendezvous(tracks, meet)
-        + detect_convoys(tracks, ConvoyParams(min_distance_m=args.convoy_distance))
+        + detect_convoys(tracks, convoy)
         + detect_zone_crossings(tracks, zones)
     )
     events.sort(key=lambda e: (e.t_start_s, e.kind))
@@ -57,13 +65,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("activity", help="detect loitering, rendezvous, convoys, zone crossings")
     add_site_argument(p)
     p.add_argument("--detections", required=True, type=Path, metavar="FILE")
-    p.add_argument("--method", choices=list(METHODS), default=DEFAULT_METHOD)
+    p.add_argument("--method", choices=list(TRACKING_METHODS), default=DEFAULT_METHOD)
     p.add_argument("--zones", type=Path, metavar="ZONES.geojson", help="polygons (lon/lat)")
-    loiter, meet, convoy = LoiterParams(), RendezvousParams(), ConvoyParams()
-    p.add_argument("--loiter-radius", type=float, default=loiter.radius_m, metavar="M")
-    p.add_argument("--loiter-time", type=float, default=loiter.min_duration_s, metavar="S")
-    p.add_argument("--meet-distance", type=float, default=meet.distance_m, metavar="M")
-    p.add_argument("--meet-time", type=float, default=meet.min_duration_s, metavar="S")
-    p.add_argument("--convoy-distance", type=float, default=convoy.min_distance_m, metavar="M")
+    # Unset options (None) keep LoiterParams / RendezvousParams / ConvoyParams defaults.
+    p.add_argument("--loiter-radius", type=float, metavar="M")
+    p.add_argument("--loiter-time", type=float, metavar="S")
+    p.add_argument("--meet-distance", type=float, metavar="M")
+    p.add_argument("--meet-time", type=float, metavar="S")
+    p.add_argument("--convoy-distance", type=float, metavar="M")
     p.add_argument("--json", action="store_true", help="print events as JSON")
     p.set_defaults(func=_run)

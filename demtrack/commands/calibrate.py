@@ -9,29 +9,21 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from typing import TYPE_CHECKING
 
-import numpy as np
-
-from demtrack.core.gcp_calibration import (
-    DEFAULT_FREE,
-    FREE_PARAMETERS,
-    GcpFit,
-    LeaveOneOut,
-    fit_camera_to_gcps,
-    leave_one_out,
-    parse_free,
-)
-from demtrack.core.gcp_io import gcps_to_local, read_gcp_csv
-from demtrack.core.pantilt import PanTiltHead
-from demtrack.core.site import Sensor, Site, load_site
-from demtrack.core.site_update import read_manifest, write_manifest
-
+from .choices import DEFAULT_FREE, FREE_PARAMETERS
 from .common import add_site_argument
+
+if TYPE_CHECKING:
+    from demtrack.core.gcp_calibration import GcpFit, LeaveOneOut
+    from demtrack.core.site import Sensor, Site
 
 __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
+    from demtrack.core.site import load_site
+
     site = load_site(args.site)
     sensor = site.sensor(args.sensor)
     cal = sensor.head.calibrate(args.threshold, reject_outliers=not args.keep_outliers)
@@ -86,6 +78,9 @@ def _run(args: argparse.Namespace) -> int:
 
 def _fitted_sensor(site: Site, sensor: Sensor, fit: GcpFit) -> Sensor:
     """The sensor posed as the fit says: yaw = mount yaw + pan reading, tilt, roll."""
+    from demtrack.core.pantilt import PanTiltHead
+    from demtrack.core.site import Sensor
+
     cam = fit.camera
     az, tilt, roll = cam.azimuth_tilt_roll_deg()
     head = PanTiltHead(cam.position_enu, az - sensor.pan_deg, cam.intrinsics, sensor.head.landmarks)
@@ -97,6 +92,8 @@ def _fmt(x: float, spec: str) -> str:
 
 
 def _print_gcp_report(sensor: Sensor, fit: GcpFit, loo: LeaveOneOut, start) -> None:
+    import numpy as np
+
     k = len(fit.names)
     used = int((~fit.excluded).sum())
     print(
@@ -182,6 +179,11 @@ def _gcp_json(sensor: Sensor, fit: GcpFit, loo: LeaveOneOut, written: bool) -> d
 
 
 def _run_gcps(args: argparse.Namespace) -> int:
+    from demtrack.core.gcp_calibration import fit_camera_to_gcps, leave_one_out, parse_free
+    from demtrack.core.gcp_io import gcps_to_local, read_gcp_csv
+    from demtrack.core.site import load_site
+    from demtrack.core.site_update import read_manifest, write_manifest
+
     site = load_site(args.site)
     sensor = site.sensor(args.sensor)
     free = parse_free(args.free)

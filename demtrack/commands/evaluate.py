@@ -6,26 +6,17 @@ import argparse
 import math
 from collections.abc import Sequence
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from demtrack.core.errors import InputFileError
-from demtrack.core.fix_builder import build_fixes
-from demtrack.core.site import Site, load_site
-from demtrack.core.tracking import (
-    METHODS,
-    ClassParams,
-    Track,
-    TrackerConfig,
-    TrackingMetrics,
-    TruthPath,
-    evaluate,
-    run_tracker,
-)
-from demtrack.samplesite.scenarios import SCENARIOS, make_scenario
 
+from .choices import SCENARIO_NAMES, TRACKING_METHODS
 from .common import add_site_argument
 from .scenario import add_scenario_parameters, params_from_args
+
+if TYPE_CHECKING:
+    from demtrack.core.site import Site
+    from demtrack.core.tracking import Track, TrackerConfig, TrackingMetrics, TruthPath
 
 __all__ = ["format_table", "plot_tracks", "register", "tracking_config"]
 
@@ -38,6 +29,8 @@ def tracking_config(vehicle_coast_s: float = 4.0, human_coast_s: float = 4.0) ->
     then takes false alarms and the filters diverge, so the library's 4 s stays the
     default. Motion parameters are the library's.
     """
+    from demtrack.core.tracking import ClassParams, TrackerConfig
+
     base = TrackerConfig()
     v, h = base.params("vehicle"), base.params("human")
     return TrackerConfig(
@@ -74,6 +67,7 @@ def plot_tracks(
 ) -> None:
     """One panel per method: true paths against its tracks over the DEM hillshade (PNG)."""
     import matplotlib
+    import numpy as np
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -118,10 +112,16 @@ def plot_tracks(
 
 
 def _run(args: argparse.Namespace) -> int:
-    methods = args.methods or list(METHODS)
-    unknown = [m for m in methods if m not in METHODS]
+    methods = args.methods or list(TRACKING_METHODS)
+    unknown = [m for m in methods if m not in TRACKING_METHODS]
     if unknown:
-        raise InputFileError(f"unknown method(s) {', '.join(unknown)}; known: {', '.join(METHODS)}")
+        known = ", ".join(TRACKING_METHODS)
+        raise InputFileError(f"unknown method(s) {', '.join(unknown)}; known: {known}")
+    from demtrack.core.fix_builder import build_fixes
+    from demtrack.core.site import load_site
+    from demtrack.core.tracking import evaluate, run_tracker
+    from demtrack.samplesite.scenarios import make_scenario
+
     params = params_from_args(args)
     site = load_site(args.site)
     sc = make_scenario(site, args.scenario, params)
@@ -144,7 +144,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``evaluate`` command."""
     p = sub.add_parser("evaluate", help="score every tracking method on a scenario")
     add_site_argument(p)
-    p.add_argument("--scenario", required=True, choices=sorted(SCENARIOS), help="scenario")
+    p.add_argument("--scenario", required=True, choices=SCENARIO_NAMES, help="scenario")
     p.add_argument("--methods", nargs="+", metavar="M", help="methods (default: all)")
     p.add_argument("--plot", metavar="PNG", help="write a plot of truth against tracks")
     add_scenario_parameters(p)

@@ -5,23 +5,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+from typing import TYPE_CHECKING
 
-from demtrack.core.site import load_site
-from demtrack.core.tracking import METHODS
-from demtrack.samplesite.activity_eval import (
-    CaseResult,
-    DetectorScore,
-    evaluate_case,
-    score_detectors,
-)
-from demtrack.samplesite.activity_scenarios import (
-    ACTIVITY_CASES,
-    DEFAULT_ACTIVITY_PARAMS,
-    make_activity_scenario,
-)
-
+from .choices import ACTIVITY_CASE_NAMES, ACTIVITY_SEED, DEFAULT_METHOD, TRACKING_METHODS
 from .common import add_site_argument
-from .track import DEFAULT_METHOD
+
+if TYPE_CHECKING:
+    from demtrack.samplesite.activity_eval import CaseResult, DetectorScore
 
 __all__ = ["format_scores", "register"]
 
@@ -64,9 +54,16 @@ def _case_lines(r: CaseResult) -> list[str]:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from demtrack.core.site import load_site
+    from demtrack.samplesite.activity_eval import evaluate_case, score_detectors
+    from demtrack.samplesite.activity_scenarios import (
+        DEFAULT_ACTIVITY_PARAMS,
+        make_activity_scenario,
+    )
+
     site = load_site(args.site)
     params = dataclasses.replace(DEFAULT_ACTIVITY_PARAMS, seed=args.seed)
-    names = args.case or list(ACTIVITY_CASES)
+    names = args.case or list(ACTIVITY_CASE_NAMES)
     source = "truth" if args.on_truth else "tracks"
     results = []
     for name in names:
@@ -100,12 +97,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--case",
         action="append",
-        choices=list(ACTIVITY_CASES),
+        choices=list(ACTIVITY_CASE_NAMES),
         help="a case (repeatable; default: all)",
     )
     p.add_argument(
         "--method",
-        choices=list(METHODS),
+        choices=list(TRACKING_METHODS),
         default=DEFAULT_METHOD,
         help=f"tracking method (default {DEFAULT_METHOD})",
     )
@@ -114,8 +111,6 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="run the detectors on the true paths instead of tracks",
     )
-    p.add_argument(
-        "--seed", type=int, default=DEFAULT_ACTIVITY_PARAMS.seed, help="random seed (default 0)"
-    )
+    p.add_argument("--seed", type=int, default=ACTIVITY_SEED, help="random seed (default 0)")
     p.add_argument("--json", action="store_true", help="print scores and events as JSON")
     p.set_defaults(func=_run)

@@ -7,19 +7,19 @@ import json
 import sys
 from pathlib import Path
 
-from demtrack.core.detections import read_detections
-from demtrack.core.fix_builder import build_fixes, sensor_sizes
-from demtrack.core.gap_explain import explain_track_gaps
-from demtrack.core.site import load_site
-from demtrack.core.tracking import METHODS, run_tracker
-
+from .choices import DEFAULT_METHOD, TRACKING_METHODS
 from .common import add_site_argument
-from .track import DEFAULT_METHOD
 
 __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
+    from demtrack.core.detections import read_detections
+    from demtrack.core.fix_builder import build_fixes, sensor_sizes
+    from demtrack.core.gap_explain import explain_track_gaps
+    from demtrack.core.site import load_site
+    from demtrack.core.tracking import run_tracker
+
     site = load_site(args.site)
     # With --json stdout holds only the JSON document; the read summaries go to stderr.
     log = sys.stderr if args.json else sys.stdout
@@ -80,7 +80,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--method",
-        choices=list(METHODS),
+        choices=list(TRACKING_METHODS),
         default=DEFAULT_METHOD,
         help=f"tracking method (default {DEFAULT_METHOD})",
     )

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import argparse
 import json
+from typing import TYPE_CHECKING
 
-from demtrack.core.geolocate import RULES, Geolocation, GroundHit
-from demtrack.core.site import load_site
-
+from .choices import GEOLOCATE_RULES
 from .common import add_site_argument
+
+if TYPE_CHECKING:
+    from demtrack.core.geolocate import Geolocation, GroundHit
 
 __all__ = ["geolocation_to_dict", "print_geolocation", "register"]
 
@@ -55,6 +57,8 @@ def print_geolocation(g: Geolocation) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from demtrack.core.site import load_site
+
     site = load_site(args.site)
     sensor = site.sensor(args.sensor)
     geo = site.geolocator(pixel_sigma_px=args.pixel_sigma)
@@ -80,7 +84,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar=("U", "V"),
         help="column and row; (0, 0) is the centre of the top-left pixel",
     )
-    p.add_argument("--rule", choices=RULES, default="all", help="which hit(s) to report")
+    p.add_argument("--rule", choices=GEOLOCATE_RULES, default="all", help="which hit(s) to report")
     p.add_argument(
         "--pixel-sigma",
         type=float,

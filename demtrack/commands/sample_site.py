@@ -13,16 +13,16 @@ import argparse
 import shutil
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from demtrack.core.geolocate import Geolocator
-from demtrack.core.site import MANIFEST, Sensor, Site, load_site
-
+from .choices import MANIFEST
 from .common import DEFAULT_SITE
 from .geolocate import print_geolocation
 from .serve import add_live_arguments, live_overrides, serve_app
+
+if TYPE_CHECKING:
+    from demtrack.core.geolocate import Geolocator
+    from demtrack.core.site import Sensor, Site
 
 __all__ = ["DEMO_SCENARIOS", "ensure_sample_site", "register"]
 
@@ -30,16 +30,29 @@ __all__ = ["DEMO_SCENARIOS", "ensure_sample_site", "register"]
 DEMO_SCENARIOS = ["vehicle-run", "pedestrians"]
 
 
-def ensure_sample_site(path: Path, *, rebuild: bool = False) -> Path:
-    """Build the sample site at ``path`` unless a site is already there."""
+def ensure_sample_site(path: Path, *, rebuild: bool = False, warmers: Any = None) -> Path:
+    """Build the sample site at ``path`` unless a site is already there.
+
+    The ray-casting kernels the build renders with compile in two child processes while
+    it scans and grids (``warmers``: already started ones, else started here); a site
+    already there stops them.
+    """
     from demtrack.samplesite.build import build_sample_site
+    from demtrack.samplesite.kernel_warmup import KernelWarmers
 
     if rebuild and (path / MANIFEST).exists():
         shutil.rmtree(path)
-    if not (path / MANIFEST).exists():
-        print(f"building the sample site in {path} ...")
-        build_sample_site(path, log=print)
+    if (path / MANIFEST).exists():
+        if warmers is not None:
+            warmers.stop()
+        return path
+    print(f"building the sample site in {path} ...", flush=True)
+    build_sample_site(path, log=_say, warmers=warmers or KernelWarmers.start())
     return path
+
+
+def _say(line: str) -> None:
+    print(line, flush=True)
 
 
 def _sample_site(args: argparse.Namespace) -> int:
@@ -53,6 +66,8 @@ def _showcase_pixel(site: Site, sensor: Sensor, geo: Geolocator) -> tuple[float,
 
     That is the paper's case: a tree crown in front of the road takes the first hit.
     """
+    import numpy as np
+
     intr = sensor.camera.intrinsics
     v, u = np.mgrid[8 : intr.height : 16, 8 : intr.width : 16]
     results = geo.geolocate(sensor.camera, u.ravel().astype(float), v.ravel().astype(float))
@@ -80,12 +95,38 @@ def _fresh_db(path: Path) -> None:
 
 
 def _live(args: argparse.Namespace) -> int:
+    t_start = time.monotonic()
+    live = live_overrides(args, DEMO_SCENARIOS)  # checks the options before any work
+    if (args.site / MANIFEST).exists():
+        return _serve_demo(args, args.site, live, t_start, None)
+    from demtrack.samplesite.kernel_warmup import KernelWarmers
+
+    # Cold start: the kernels compile in two children beside the server imports and the
+    # scan; the server's own warm-up then waits for a low-priority third child.
+    warmers = KernelWarmers.start()
+    server_warmer = None
+    try:
+        import demtrack.server.app  # noqa: F401 - imported while the kernels compile
+
+        site_dir = ensure_sample_site(args.site, warmers=warmers)
+        server_warmer = KernelWarmers.start(["server"])
+        return _serve_demo(args, site_dir, live, t_start, server_warmer)
+    finally:
+        warmers.stop()
+        if server_warmer is not None:
+            server_warmer.stop()
+
+
+def _serve_demo(
+    args: argparse.Namespace,
+    site_dir: Path,
+    live: dict[str, Any],
+    t_start: float,
+    server_warmer: Any,
+) -> int:
     from demtrack.server.app import create_app
     from demtrack.server.scene3d import display_host
 
-    t_start = time.monotonic()
-    live = live_overrides(args, DEMO_SCENARIOS)  # checks the options before any work
-    site_dir = ensure_sample_site(args.site)
     db = args.db if args.db is not None else site_dir / "demo.sqlite3"
     if not args.keep_db:
         _fresh_db(db)
@@ -96,6 +137,8 @@ def _live(args: argparse.Namespace) -> int:
         **live,
     }
     app = create_app(**overrides)
+    if server_warmer is not None:
+        app.state.warm_after = server_warmer.wait
     settings = app.state.settings
     print(f"site {settings.site}, database {settings.resolved_db_path} (fresh each run)")
     print("starting the console (site, tracker, ray-casting kernels, 3D scene) ...", flush=True)
@@ -121,6 +164,8 @@ def _live(args: argparse.Namespace) -> int:
 
 
 def _walkthrough(args: argparse.Namespace) -> int:
+    from demtrack.core.site import load_site
+
     site = load_site(ensure_sample_site(args.site))
     print(
         f"\nsite {site.name!r}: frame anchored at {site.frame.lat_deg:.6f}, "

@@ -4,25 +4,23 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from types import SimpleNamespace
+from typing import TYPE_CHECKING
 
-from demtrack.core.detections import write_detections_csv, write_detections_jsonl
 from demtrack.core.errors import InputFileError
-from demtrack.core.site import load_site
-from demtrack.samplesite.scenarios import (
-    SCENARIOS,
-    ScenarioParams,
-    make_scenario,
-    write_truth_json,
-)
 
+from .choices import SCENARIO_DEFAULTS, SCENARIO_NAMES
 from .common import add_site_argument
+
+if TYPE_CHECKING:
+    from demtrack.samplesite.scenarios import ScenarioParams
 
 __all__ = ["add_scenario_parameters", "params_from_args", "register"]
 
 
 def add_scenario_parameters(p: argparse.ArgumentParser) -> None:
     """Add the detection-noise options shared by ``scenario`` and ``evaluate``."""
-    d = ScenarioParams()
+    d = SimpleNamespace(**SCENARIO_DEFAULTS)  # ScenarioParams' defaults, without its imports
     p.add_argument(
         "--noise-px",
         type=float,
@@ -49,6 +47,8 @@ def add_scenario_parameters(p: argparse.ArgumentParser) -> None:
 
 def params_from_args(args: argparse.Namespace) -> ScenarioParams:
     """The :class:`ScenarioParams` the options ask for."""
+    from demtrack.samplesite.scenarios import ScenarioParams
+
     return ScenarioParams(
         noise_px=args.noise_px,
         p_miss=args.p_miss,
@@ -62,6 +62,10 @@ def _run(args: argparse.Namespace) -> int:
     suffix = out.suffix.lower()
     if suffix not in (".csv", ".jsonl", ".ndjson"):
         raise InputFileError(f"unknown detection file type {suffix!r} (use .csv or .jsonl)")
+    from demtrack.core.detections import write_detections_csv, write_detections_jsonl
+    from demtrack.core.site import load_site
+    from demtrack.samplesite.scenarios import make_scenario, write_truth_json
+
     params = params_from_args(args)
     site = load_site(args.site)
     sc = make_scenario(site, args.name, params)
@@ -84,7 +88,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``scenario`` command."""
     p = sub.add_parser("scenario", help="simulate detections of a scenario on the sample site")
     add_site_argument(p)
-    p.add_argument("--name", required=True, choices=sorted(SCENARIOS), help="scenario")
+    p.add_argument("--name", required=True, choices=SCENARIO_NAMES, help="scenario")
     p.add_argument(
         "-o", "--output", required=True, metavar="FILE", help="detections file (.jsonl or .csv)"
     )

@@ -9,13 +9,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from demtrack.samplesite.scenarios import SCENARIOS
-
+from .choices import SCENARIO_NAMES
 from .common import DEFAULT_SITE
 
 __all__ = ["add_live_arguments", "live_overrides", "print_token", "register", "serve_app"]
-
-SCENARIO_NAMES = tuple(sorted(SCENARIOS))
 
 
 def serve_app(

@@ -11,35 +11,12 @@ import argparse
 import json
 import shutil
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
-
-from demtrack.core.camera import Intrinsics
-from demtrack.core.camera_pose import check_camera_on_dem, pose_from_survey
-from demtrack.core.crs_import import local_crs_wkt
-from demtrack.core.dem_import import (
-    footprint_bounds_local,
-    grid_over,
-    import_dem,
-    native_cell_m,
-    read_raster_info,
-    suggest_frame,
-)
 from demtrack.core.errors import CameraError, SiteError
-from demtrack.core.geodesy import LocalFrame, as_crs
-from demtrack.core.grid import GridSpec
-from demtrack.core.ortho_import import import_orthophoto
-from demtrack.core.orthophoto import write_orthophoto
-from demtrack.core.pantilt import PanTiltHead
-from demtrack.core.road_io import read_road_lines, read_roads_geojson, road_lines_to_geojson
-from demtrack.core.site import MANIFEST, Sensor, load_site
-from demtrack.core.site_update import (
-    new_manifest,
-    read_manifest,
-    write_atomic,
-    write_dem_atomic,
-    write_manifest,
-)
+
+if TYPE_CHECKING:
+    from demtrack.core.camera import Intrinsics
 
 __all__ = ["register"]
 
@@ -65,6 +42,25 @@ def _geoid(args: argparse.Namespace, doc: dict | None) -> float:
 
 
 def _run_import_dem(args: argparse.Namespace) -> int:
+    from demtrack.core.crs_import import local_crs_wkt
+    from demtrack.core.dem_import import (
+        footprint_bounds_local,
+        grid_over,
+        import_dem,
+        native_cell_m,
+        read_raster_info,
+        suggest_frame,
+    )
+    from demtrack.core.geodesy import LocalFrame
+    from demtrack.core.grid import GridSpec
+    from demtrack.core.site import MANIFEST, load_site
+    from demtrack.core.site_update import (
+        new_manifest,
+        read_manifest,
+        write_dem_atomic,
+        write_manifest,
+    )
+
     root: Path = args.site
     exists = (root / MANIFEST).is_file()
     doc = read_manifest(root) if exists else None
@@ -146,6 +142,14 @@ def _run_import_dem(args: argparse.Namespace) -> int:
 
 
 def _run_import_ortho(args: argparse.Namespace) -> int:
+    from demtrack.core.crs_import import local_crs_wkt
+    from demtrack.core.dem_import import native_cell_m, read_raster_info
+    from demtrack.core.grid import GridSpec
+    from demtrack.core.ortho_import import import_orthophoto
+    from demtrack.core.orthophoto import write_orthophoto
+    from demtrack.core.site import load_site
+    from demtrack.core.site_update import read_manifest, write_atomic, write_manifest
+
     root: Path = args.site
     site = load_site(root)
     doc = read_manifest(root)
@@ -172,6 +176,12 @@ def _run_import_ortho(args: argparse.Namespace) -> int:
 
 
 def _run_import_roads(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from demtrack.core.road_io import read_road_lines, read_roads_geojson, road_lines_to_geojson
+    from demtrack.core.site import load_site
+    from demtrack.core.site_update import read_manifest, write_atomic, write_manifest
+
     root: Path = args.site
     site = load_site(root)
     doc = read_manifest(root)
@@ -201,6 +211,8 @@ def _run_import_roads(args: argparse.Namespace) -> int:
 
 
 def _intrinsics(args: argparse.Namespace) -> Intrinsics:
+    from demtrack.core.camera import Intrinsics
+
     if args.intrinsics is not None:
         try:
             data = json.loads(Path(args.intrinsics).read_text(encoding="utf-8"))
@@ -228,6 +240,12 @@ def _intrinsics(args: argparse.Namespace) -> Intrinsics:
 
 
 def _run_add_camera(args: argparse.Namespace) -> int:
+    from demtrack.core.camera_pose import check_camera_on_dem, pose_from_survey
+    from demtrack.core.geodesy import as_crs
+    from demtrack.core.pantilt import PanTiltHead
+    from demtrack.core.site import Sensor, load_site
+    from demtrack.core.site_update import read_manifest, write_atomic, write_manifest
+
     root: Path = args.site
     site = load_site(root)
     doc = read_manifest(root)

@@ -5,27 +5,20 @@ from __future__ import annotations
 import argparse
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from demtrack.core.detections import read_detections
 from demtrack.core.errors import InputFileError
-from demtrack.core.fix_builder import build_fixes, sensor_sizes
-from demtrack.core.site import Site, load_site
-from demtrack.core.track_io import (
-    write_tracks_csv,
-    write_tracks_geojson,
-    write_tracks_gpkg,
-    write_tracks_gpx,
-    write_tracks_kml,
-)
-from demtrack.core.tracking import METHODS, Track, run_tracker
 
+from .choices import DEFAULT_METHOD, TRACKING_METHODS
 from .common import add_site_argument
+
+if TYPE_CHECKING:
+    from demtrack.core.site import Site
+    from demtrack.core.tracking import Track
 
 __all__ = ["DEFAULT_METHOD", "register", "track_detections"]
 
 SUFFIXES = (".geojson", ".json", ".csv", ".gpx", ".kml", ".gpkg")
-#: Tracking method used by ``track`` and ``activity`` unless ``--method`` says otherwise.
-DEFAULT_METHOD = "multi-hypothesis-road"
 
 
 def _epoch(text: str | None) -> datetime | None:
@@ -40,6 +33,10 @@ def _epoch(text: str | None) -> datetime | None:
 
 def track_detections(site: Site, detections_path: Path, method: str) -> list[Track]:
     """Read detections, geolocate them into fixes and track; prints what was skipped."""
+    from demtrack.core.detections import read_detections
+    from demtrack.core.fix_builder import build_fixes, sensor_sizes
+    from demtrack.core.tracking import run_tracker
+
     detections, ingest = read_detections(detections_path, sensors=sensor_sizes(site))
     print(ingest.summary())
     fixes, report = build_fixes(site, detections)
@@ -53,6 +50,15 @@ def _run(args: argparse.Namespace) -> int:
     if suffix not in SUFFIXES:
         raise InputFileError(f"unknown track file type {suffix!r} (use {', '.join(SUFFIXES)})")
     epoch = _epoch(args.epoch)
+    from demtrack.core.site import load_site
+    from demtrack.core.track_io import (
+        write_tracks_csv,
+        write_tracks_geojson,
+        write_tracks_gpkg,
+        write_tracks_gpx,
+        write_tracks_kml,
+    )
+
     site = load_site(args.site)
     tracks = track_detections(site, args.detections, args.method)
     frame = site.frame
@@ -89,7 +95,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--method",
-        choices=list(METHODS),
+        choices=list(TRACKING_METHODS),
         default=DEFAULT_METHOD,
         help="tracking method (default multi-hypothesis-road)",
     )

@@ -6,20 +6,21 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
-
-from demtrack.core.site import load_site
 from demtrack.core.target_heights import DEFAULT_TARGET_HEIGHT_M
-from demtrack.core.visibility import blind_spots, viewshed
 
 from .common import add_site_argument
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = ["register", "write_coverage"]
 
 
 def write_coverage(path: Path, count: np.ndarray, masks: dict[str, np.ndarray], dem) -> None:
     """GeoTIFF on the DEM grid: band 1 the number of sensors, then one 0/1 band per sensor."""
+    import numpy as np
     import rasterio
 
     g = dem.grid
@@ -55,6 +56,11 @@ def _progress(sensor_id: str):
 
 
 def _run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from demtrack.core.site import load_site
+    from demtrack.core.visibility import blind_spots, viewshed
+
     site = load_site(args.site)
     ids = args.sensor or list(site.sensors)
     sensors = [site.sensor(s) for s in ids]

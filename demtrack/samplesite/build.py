@@ -13,6 +13,7 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from PIL import Image
@@ -33,6 +34,9 @@ from .ortho import ortho_grid, paint_orthophoto
 from .scan import coarse_dem, simulate_laser_scan
 from .world import ANCHOR, EXTENT_M, make_world
 
+if TYPE_CHECKING:
+    from .kernel_warmup import KernelWarmers
+
 __all__ = ["DEM_CELL_M", "build_sample_site"]
 
 DEM_CELL_M = 0.5
@@ -40,15 +44,38 @@ SITE_NAME = "Bushy Run (synthetic sample site)"
 
 
 def build_sample_site(
-    out_dir: str | Path, *, seed: int = 7, log: Callable[[str], None] | None = None
+    out_dir: str | Path,
+    *,
+    seed: int = 7,
+    log: Callable[[str], None] | None = None,
+    warmers: KernelWarmers | None = None,
 ) -> Path:
     """Generate the sample site into ``out_dir`` (created; must be empty or a site).
 
     Returns the folder. ``log`` receives one line per step with its duration.
+    ``warmers`` (:class:`~demtrack.samplesite.kernel_warmup.KernelWarmers`, optional) are
+    child processes compiling the ray-casting kernels into numba's cache while the scan,
+    DEM and orthophoto are made; the camera views are rendered once they are done (they
+    are stopped if the build fails first).
     """
     out = Path(out_dir)
     if out.exists() and any(out.iterdir()) and not (out / MANIFEST).exists():
+        if warmers is not None:
+            warmers.stop()
         raise SiteError(f"refusing to write the sample site into a non-empty folder: {out}")
+    try:
+        _build(out, seed, log, warmers)
+    except BaseException:
+        if warmers is not None:
+            warmers.stop()
+        raise
+    return out
+
+
+def _build(
+    out: Path, seed: int, log: Callable[[str], None] | None, warmers: KernelWarmers | None
+) -> None:
+    """The build's steps (see :func:`build_sample_site`)."""
     (out / "images").mkdir(parents=True, exist_ok=True)
     say = log or (lambda _msg: None)
     t0 = time.perf_counter()
@@ -82,6 +109,9 @@ def build_sample_site(
     )
     write_roads_geojson(out / "roads.geojson", roads, frame)
     step(f"orthophoto {grid.ncols}x{grid.nrows} at {grid.cell_m} m; {len(roads)} roads")
+    if warmers is not None:
+        warmers.wait()  # a failed job only means the render compiles what is missing
+        step("ray-casting kernels compiled (beside the steps above)")
 
     sensors, truth = [], {}
     for spec, head, pan, tilt in sighting_heads(world):
@@ -105,4 +135,3 @@ def build_sample_site(
     (out / MANIFEST).write_text(json.dumps(doc, indent=2), "utf-8")
     (out / "truth.json").write_text(json.dumps({"sensors": truth}, indent=2), "utf-8")
     step(f"site written to {out}")
-    return out

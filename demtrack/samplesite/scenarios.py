@@ -237,11 +237,14 @@ def image_boxes(
         dist = np.linalg.norm(vec, axis=1)
         # A surface crossing more than 1 m before the point hides it; the margin absorbs
         # the DEM's centimetres of error where a ray grazes the ground at a target's feet.
+        # No angular index: for these scattered target points building one costs as much
+        # CPU as it saves, and on a cold machine its kernels cost a minute to compile.
         hits = caster.cast(
             np.broadcast_to(origin, vec.shape).copy(),
             vec,
             np.maximum(dist - 1.0, 0.0),
             mode="first",
+            coherent=False,
         )
         seen[idx] = hits.counts == 0
     seen = seen.reshape(f, k)

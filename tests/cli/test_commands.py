@@ -252,6 +252,7 @@ def test_build_dem_from_laz_in_utm_lands_in_the_site_frame(
 def test_viewshed_reports_coverage_and_writes_a_raster(capsys, tmp_path, sample_site_dir):
     import rasterio
 
+    from demtrack.core.target_heights import DEFAULT_TARGET_HEIGHT_M
     from demtrack.core.visibility import viewshed
 
     out_tif = tmp_path / "cov.tif"
@@ -261,6 +262,6 @@ def test_viewshed_reports_coverage_and_writes_a_raster(capsys, tmp_path, sample_
     with rasterio.open(out_tif) as src:
         count, cam1 = src.read(1), src.read(2)
         assert src.descriptions[1] == "seen_by_cam1"
-    ref = viewshed(site.dem, site.sensor("cam1").camera, target_height_m=1.0)
+    ref = viewshed(site.dem, site.sensor("cam1").camera, target_height_m=DEFAULT_TARGET_HEIGHT_M)
     np.testing.assert_array_equal(cam1.astype(bool), ref)
     assert count.max() <= len(site.sensors) and (count >= 1).any()
