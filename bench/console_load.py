@@ -14,59 +14,18 @@ Run: ``python -m demtrack.bench.console_load [--site DIR] [--runs 5]``. Needs
 from __future__ import annotations
 
 import argparse
-import os
-import socket
 import statistics
-import subprocess
-import sys
 import tempfile
-import time
 from pathlib import Path
+
+from .console_harness import ServeProcess, launch_chromium
 
 __all__ = ["main"]
 
-_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
 _TOKEN = "bench-console-token"
 
 
-def _port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def _serve(site: Path, db: Path, port: int) -> subprocess.Popen:
-    import httpx2 as httpx
-
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "demtrack.cli", "serve", "--site", str(site), "--db", str(db)]
-        + ["--port", str(port), "--log-level", "warning"],
-        env={**os.environ, "DEMTRACK_TOKEN": _TOKEN},
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    deadline = time.monotonic() + 300
-    while time.monotonic() < deadline:
-        try:
-            if httpx.get(f"http://127.0.0.1:{port}/api/health", timeout=2).status_code == 200:
-                return proc
-        except httpx.TransportError:
-            time.sleep(0.3)
-    proc.kill()
-    raise RuntimeError("the server did not start")
-
-
-def _ingest(site: Path, port: int, scenario: str) -> int:
-    import httpx2 as httpx
-
+def _ingest(site: Path, server: ServeProcess, scenario: str) -> int:
     from demtrack.core.site import load_site
     from demtrack.samplesite.scenarios import make_scenario
 
@@ -75,8 +34,7 @@ def _ingest(site: Path, port: int, scenario: str) -> int:
         {"t": d.t_s, "sensor": d.sensor, "bbox": list(d.bbox), "class": d.cls, "score": d.score}
         for d in dets
     ]
-    auth = {"Authorization": f"Bearer {_TOKEN}"}
-    with httpx.Client(base_url=f"http://127.0.0.1:{port}", headers=auth, timeout=120) as c:
+    with server.client() as c:
         for i in range(0, len(recs), 500):
             c.post("/api/detections", json={"detections": recs[i : i + 500]}).raise_for_status()
         return len(c.get("/api/tracks").json()["tracks"])
@@ -97,16 +55,13 @@ def main(argv: list[str] | None = None) -> int:
             from demtrack.samplesite.build import build_sample_site
 
             site = build_sample_site(Path(tmp) / "site")
-        port = _port()
-        proc = _serve(site, Path(tmp) / "bench.sqlite3", port)
+        server = ServeProcess(site, Path(tmp) / "bench.sqlite3", _TOKEN).start()
         try:
-            n_tracks = _ingest(site, port, args.scenario)
-            url = f"http://127.0.0.1:{port}/?token={_TOKEN}"
+            n_tracks = _ingest(site, server, args.scenario)
+            url = f"{server.url}/?token={_TOKEN}"
             times = []
             with sync_playwright() as pw:
-                browser = pw.chromium.launch(
-                    executable_path="/usr/bin/chromium", headless=True, args=_ARGS
-                )
+                browser = launch_chromium(pw)
                 for k in range(args.runs + 1):  # the first run warms the server's caches
                     ctx = browser.new_context(viewport={"width": 1280, "height": 800})
                     page = ctx.new_page()
@@ -120,8 +75,7 @@ def main(argv: list[str] | None = None) -> int:
                     ctx.close()
                 browser.close()
         finally:
-            proc.terminate()
-            proc.wait(30)
+            server.stop()
     print(
         f"console load on loopback, {n_tracks} tracks ({args.scenario}), {args.runs} runs:"
         f" median {statistics.median(times):.2f} s, worst {max(times):.2f} s (target < 2 s)"

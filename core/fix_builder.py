@@ -178,9 +178,9 @@ def build_fixes(
         What was skipped and why.
     """
     offsets = default_foot_offsets() if foot_offset_m is None else dict(foot_offset_m)
-    for cls, value in offsets.items():
+    for name, value in offsets.items():
         if not (math.isfinite(value) and value >= 0):
-            raise TrackingError(f"foot offset for {cls!r} must be >= 0 m, got {value}")
+            raise TrackingError(f"foot offset for {name!r} must be >= 0 m, got {value}")
     by_sensor, counts = _check(detections, site, edge_tolerance_px)
     geo = site.geolocator(pixel_sigma_px=pixel_sigma_px)
     extent_var = footprint_variances()

@@ -39,6 +39,7 @@ from .routers import (
     events,
     geolocate,
     health,
+    scene3d,
     sensors,
     site,
     stream,
@@ -95,15 +96,19 @@ def _check(settings: Settings) -> None:
             )
 
 
-def _warm_kernels(done: threading.Event) -> None:
+def _warm_kernels(done: threading.Event, after: Any = None) -> None:
     """Compile (or load from numba's cache) the kernels requests use, then set ``done``.
 
     Run in a thread at start-up: from the on-disk cache this takes about a second; a cold
     compile takes minutes of CPU on two cores, and the first page, the site and the
     imagery are served meanwhile (a request that casts rays waits for its kernel).
+    ``after`` (``app.state.warm_after``, optional) is called first: ``demtrack demo`` sets
+    it to wait for a child process already compiling these kernels into numba's cache.
     """
     t0 = time.perf_counter()
     try:
+        if after is not None:
+            after()
         warm_up(angular=False)  # requests cast small batches: the pyramid walk only
         undistort_normalized_nb(np.array([0.1]), np.array([0.1]), -0.04, 0.0, 0.0, 0.0, 0.0)
         log.info("ray-casting kernels ready in %.1f s", time.perf_counter() - t0)
@@ -135,7 +140,15 @@ def _start_replay(site_: Site, store: Store, pipeline: Pipeline, settings: Setti
     t0 = start_time_after(store.last_times())
     names = list(settings.replay)
     replay = Replay(
-        lambda: scenario_stream(site_, names, t0, loop=settings.replay_loop),
+        lambda: scenario_stream(
+            site_,
+            names,
+            t0,
+            loop=settings.replay_loop,
+            copies=settings.replay_copies,
+            rate_hz=settings.replay_rate_hz,
+            duration_s=settings.replay_duration_s or None,
+        ),
         pipeline.ingest,
         speed=settings.replay_speed,
     )
@@ -149,7 +162,10 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     app.state.warm = threading.Event()
     if settings.warm_up:  # compiles in the background: the first page need not wait for it
         threading.Thread(
-            target=_warm_kernels, args=(app.state.warm,), name="demtrack-warm-up", daemon=True
+            target=_warm_kernels,
+            args=(app.state.warm, getattr(app.state, "warm_after", None)),
+            name="demtrack-warm-up",
+            daemon=True,
         ).start()
     else:
         app.state.warm.set()
@@ -235,6 +251,7 @@ def create_app(settings: Settings | None = None, **overrides: Any) -> FastAPI:
     app.include_router(synopsis.router, dependencies=reader)
     app.include_router(events.router, dependencies=reader)
     app.include_router(visibility.router, dependencies=reader)
+    app.include_router(scene3d.router)
     app.include_router(stream.router)
     app.include_router(web.router)
     return app

@@ -251,6 +251,7 @@ class Store:
         events: Iterable[tuple[str, dict[str, Any]]],
         *,
         replace_tracks: bool = False,
+        keep_track_ids: Iterable[int] = (),
         activity: Iterable[dict[str, Any]] = (),
     ) -> list[int]:
         """Store fixes, upsert tracks and activity, append events in one transaction.
@@ -264,7 +265,10 @@ class Store:
         events : iterable of (type, payload)
             Payloads without ``seq``; each gets the next sequence number.
         replace_tracks : bool
-            Delete every stored track first.
+            Delete every stored track first, except those of ``keep_track_ids``.
+        keep_track_ids : iterable of int
+            With ``replace_tracks``: tracks left as they are (ended tracks the live
+            tracker no longer holds).
         activity : iterable of dict
             Activity event bodies (``key, kind, t_start_s, t_end_s, track_ids, open``
             and the rest): inserted, or replacing the row with the same ``key`` (which
@@ -283,7 +287,12 @@ class Store:
                 [(i, t, s, k, st, _dumps(b)) for i, t, s, k, st, b in fixes],
             )
             if replace_tracks:
-                c.execute("DELETE FROM tracks")
+                keep = set(keep_track_ids)
+                if keep:
+                    gone = [(i,) for (i,) in c.execute("SELECT id FROM tracks") if i not in keep]
+                    c.executemany("DELETE FROM tracks WHERE id = ?", gone)
+                else:
+                    c.execute("DELETE FROM tracks")
             c.executemany(
                 "INSERT OR REPLACE INTO tracks (id, cls, t_start, t_end, e_min, n_min, e_max,"
                 " n_max, sensors, live, body) VALUES (?,?,?,?,?,?,?,?,?,?,?)",
@@ -421,7 +430,8 @@ class Store:
         Only the coarse test is made here (time span and bounding box overlap); the
         caller clips the points.
         """
-        clauses, params = [], []
+        clauses: list[str] = []
+        params: list[float | str] = []
         if t_from is not None:
             clauses.append("t_end >= ?")
             params.append(t_from)
@@ -448,7 +458,8 @@ class Store:
         limit: int = 10_000,
     ) -> list[dict[str, Any]]:
         """Activity event bodies overlapping ``[t_from, t_to]``, of the kinds, by start time."""
-        clauses, params = [], []
+        clauses: list[str] = []
+        params: list[float | str] = []
         if t_from is not None:
             clauses.append("t_end >= ?")
             params.append(t_from)

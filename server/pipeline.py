@@ -16,6 +16,13 @@ Reorder buffer
     ``tracked`` fixes, hands over those at most ``reorder_lag_s`` behind the newest and
     puts the rest back in the buffer: the same state as before the restart.
 
+Memory
+    The tracker forgets tracks that ended more than ``retain_ended_s`` ago (scenario
+    time; never less than the re-acquisition window nor, with live events, their
+    window), after their final form is stored: memory stays bounded over a long run
+    while SQLite and the API keep every track. The start-up replay forgets them as it
+    goes, and leaves their stored rows alone.
+
 Live events
     After each batch :class:`~demtrack.server.live_events.LiveEvents` may run the activity
     detectors and hand-off prediction (every ``every_s`` of scenario time); its events are
@@ -41,7 +48,7 @@ from demtrack.core.errors import DemtrackError
 from demtrack.core.fix_builder import build_fixes, sensor_sizes
 from demtrack.core.site import Site
 from demtrack.core.tracking import build_tracker
-from demtrack.core.tracking.types import Detection, Fix, Track
+from demtrack.core.tracking.types import CLASSES, Detection, Fix, Track
 from demtrack.core.zone_io import read_zones_geojson
 
 from .db import Store
@@ -54,6 +61,8 @@ log = logging.getLogger("demtrack.server")
 #: ``publish(messages)``: each message a dict with ``seq`` (called under the lock, in order).
 Publisher = Callable[[list[dict[str, Any]]], None]
 _MAX_ISSUES = 20
+#: The start-up replay forgets old ended tracks every this many fixes.
+_REPLAY_DROP_EVERY = 4096
 
 
 def _hit(p: np.ndarray, sigma: float, geo: tuple[float, float, float]) -> dict[str, float]:
@@ -76,6 +85,7 @@ def pipeline_options(settings: Any) -> dict[str, Any]:
     """
     return {
         "reorder_lag_s": settings.reorder_lag_s,
+        "retain_ended_s": settings.track_retain_s,
         "events": (
             LiveEventParams(
                 every_s=settings.events_every_s,
@@ -103,9 +113,21 @@ def pipeline_options(settings: Any) -> dict[str, Any]:
 
 
 def fix_from_body(body: dict[str, Any]) -> Fix:
-    """The tracker's :class:`Fix` from a stored fix body (``detection_index`` = detection id)."""
+    """The tracker's :class:`Fix` from a stored fix body (``detection_index`` = detection id).
+
+    The same fix the public constructor makes (the direction normalised the same way),
+    built without its per-field checks when one vectorised check shows the body is
+    well formed - every stored body is, since the server wrote it; anything else goes
+    through the constructor, which names the problem.
+    """
     hits = body["hits"]
     road = body.get("road_hit")
+    hits_enu = [[h["e_m"], h["n_m"], h["u_m"]] for h in hits]
+    sigma = [h["sigma_m"] for h in hits]
+    road_enu = None if road is None else [road["e_m"], road["n_m"], road["u_m"]]
+    fast = _trusted_fix(body, hits_enu, sigma, road_enu)
+    if fast is not None:
+        return fast
     return Fix(
         t_s=body["t_s"],
         sensor=body["sensor"],
@@ -113,10 +135,95 @@ def fix_from_body(body: dict[str, Any]) -> Fix:
         detection_index=body["detection_id"],
         origin_enu=body["origin_enu"],
         direction_enu=body["direction_enu"],
-        hits_enu=[[h["e_m"], h["n_m"], h["u_m"]] for h in hits],
-        hit_sigma_m=[h["sigma_m"] for h in hits],
-        road_hit_enu=None if road is None else [road["e_m"], road["n_m"], road["u_m"]],
+        hits_enu=hits_enu,
+        hit_sigma_m=sigma,
+        road_hit_enu=road_enu,
         score=body.get("score"),
+    )
+
+
+def _stored_fix(det_id: int, d: Detection, fix: Fix) -> Fix:
+    """What :func:`fix_from_body` makes of the body :meth:`Pipeline._fix_bodies` stores.
+
+    The body holds the fix's own floats (``tolist`` and JSON keep every bit) and no hit
+    covariances; the direction is normalised again, as the constructor does.
+    """
+    direction = np.array(fix.direction_enu, dtype=np.float64)
+    direction /= float(np.linalg.norm(direction))
+    direction.setflags(write=False)
+    return Fix._trusted(
+        d.t_s,
+        d.sensor,
+        d.cls,
+        det_id,
+        fix.origin_enu,
+        direction,
+        fix.hits_enu,
+        fix.hit_sigma_m,
+        fix.road_hit_enu,
+        d.score,
+        None,
+    )
+
+
+def _trusted_fix(
+    body: dict[str, Any],
+    hits_enu: list[list[float]],
+    sigma: list[float],
+    road_enu: list[float] | None,
+) -> Fix | None:
+    """:func:`fix_from_body`'s fix without per-field checks, or None if anything is off."""
+    try:
+        t_s = float(body["t_s"])
+        score = body.get("score")
+        flat = np.array(
+            [
+                t_s,
+                *body["origin_enu"],
+                *body["direction_enu"],
+                *(road_enu or ()),
+                *sigma,
+                *(v for h in hits_enu for v in h),
+                0.0 if score is None else float(score),
+            ],
+            dtype=np.float64,
+        )
+    except (TypeError, ValueError):
+        return None
+    n = len(sigma)
+    n_road = 0 if road_enu is None else 3
+    if (
+        flat.shape != (8 + n_road + 4 * n,)
+        or any(len(h) != 3 for h in hits_enu)
+        or body.get("cls") not in CLASSES
+        or not isinstance(body.get("sensor"), str)
+        or not np.isfinite(flat).all()
+    ):
+        return None
+    origin = flat[1:4].copy()
+    direction = flat[4:7].copy()
+    norm = float(np.linalg.norm(direction))
+    road = flat[7 : 7 + n_road].copy() if road_enu is not None else None
+    sig = flat[7 + n_road : 7 + n_road + n].copy()
+    hits = flat[7 + n_road + n : 7 + n_road + 4 * n].reshape(n, 3).copy()
+    if norm == 0.0 or np.any(sig <= 0):
+        return None
+    direction /= norm
+    for a in (origin, direction, road, sig, hits):
+        if a is not None:
+            a.setflags(write=False)
+    return Fix._trusted(
+        t_s,
+        body["sensor"],
+        body["cls"],
+        int(body["detection_id"]),
+        origin,
+        direction,
+        hits,
+        sig,
+        road,
+        None if score is None else score,
+        None,
     )
 
 
@@ -137,6 +244,10 @@ class Pipeline:
         Live activity detection and hand-off prediction; None turns them off.
     zones_path : path, optional
         GeoJSON zones for enter/leave events (ignored when the file does not exist).
+    retain_ended_s : float
+        Forget ended tracks whose last fix is more than this far behind the newest
+        tracked one (s; at least the tracker's re-acquisition window and the live events'
+        window are kept). They stay in the store.
     """
 
     def __init__(
@@ -149,6 +260,7 @@ class Pipeline:
         reorder_lag_s: float = 0.5,
         events: LiveEventParams | None = None,
         zones_path: Any = None,
+        retain_ended_s: float = 600.0,
     ) -> None:
         self.site = site
         self.store = store
@@ -157,6 +269,7 @@ class Pipeline:
         self.sizes = sensor_sizes(site)
         self.tracker = build_tracker(method, roads=site.roads)
         self.reorder_lag_s = float(reorder_lag_s)
+        self.retain_ended_s = float(retain_ended_s)
         if events is not None and zones_path is not None:
             from pathlib import Path
 
@@ -172,6 +285,9 @@ class Pipeline:
         self._live_ids: set[int] = set()
         self._points: dict[int, tuple[np.ndarray, list[dict[str, Any]]]] = {}
         self._heap: list[tuple[float, str, int, dict[str, Any]]] = []
+        #: Tracker fixes of the queued bodies made in this run (detection id -> fix):
+        #: what :func:`fix_from_body` would make of the body, without the round trip.
+        self._queued_fixes: dict[int, Fix] = {}
         self._newest_t = -math.inf
         self._released_t = -math.inf
         self._released_key: tuple[float, str, int] = (-math.inf, "", -1)
@@ -205,11 +321,13 @@ class Pipeline:
             self._heap = queued  # a sorted list is a heap
             if queued:
                 self._newest_t = max(q[0] for q in queued)
-            replayed = self._release()
+            dropped: set[int] = set()
+            replayed = self._release(dropped)
             # Every track as the replay left it (the table may hold tracks of fixes whose
             # batch was cut short); its messages were already sent before the restart.
+            # Tracks the replay forgot (ended long ago) keep their stored rows.
             rows, _ = self._track_changes(self.tracker.tracks(), force=True)
-            self.store.write_derived([], rows, [], replace_tracks=True)
+            self.store.write_derived([], rows, [], replace_tracks=True, keep_track_ids=dropped)
             if self.event_params is not None:
                 known = self.store.activity(open_only=True) + self.store.latest_activity("handoff")
                 self.live_events = LiveEvents(self.site, self.event_params, known)
@@ -292,20 +410,45 @@ class Pipeline:
         self._newest_t = max(self._newest_t, body["t_s"])
         return True
 
-    def _release(self) -> int:
-        """Hand the fixes at most ``reorder_lag_s`` behind the newest to the tracker."""
+    def _release(self, dropped: set[int] | None = None) -> int:
+        """Hand the fixes at most ``reorder_lag_s`` behind the newest to the tracker.
+
+        ``dropped``: forget old ended tracks every few thousand fixes on the way (the
+        start-up replay, whose tracks are already stored) and add their ids to it.
+        """
         horizon = self._newest_t - self.reorder_lag_s
         n = 0
         while self._heap and self._heap[0][0] <= horizon:
+            if dropped is not None and n % _REPLAY_DROP_EVERY == _REPLAY_DROP_EVERY - 1:
+                dropped.update(self._drop_ended())
             t, sensor, det_id, body = heapq.heappop(self._heap)
             self._released_key = (t, sensor, det_id)
+            fix = self._queued_fixes.pop(det_id, None)
             try:
-                self.tracker.update(fix_from_body(body), index=det_id)
+                self.tracker.update(fix or fix_from_body(body), index=det_id)
             except DemtrackError:  # cannot happen in time order; never stop the stream
                 log.exception("tracker refused fix %s", det_id)
             self._released_t = max(self._released_t, t)
             n += 1
+        if dropped is not None:
+            dropped.update(self._drop_ended())
         return n
+
+    @property
+    def keep_ended_s(self) -> float:
+        """How long (s) ended tracks stay in memory: the setting, or the events' window."""
+        window = self.event_params.window_s if self.event_params is not None else 0.0
+        return max(self.retain_ended_s, window)
+
+    def _drop_ended(self) -> list[int]:
+        """Forget tracks that ended more than :attr:`keep_ended_s` ago; their ids."""
+        if not math.isfinite(self._released_t):
+            return []
+        ids = self.tracker.drop_ended(self._released_t - self.keep_ended_s)
+        for i in ids:
+            self._seen.pop(i, None)
+            self._points.pop(i, None)
+        return ids
 
     @property
     def n_buffered(self) -> int:
@@ -331,16 +474,19 @@ class Pipeline:
                 continue
             if not self._admit(body):
                 body["tracked"] = False
+                self._queued_fixes.pop(det_id, None)
                 self.n_late += 1
             rows.append((det_id, d.t_s, d.sensor, d.cls, "fix", body))
             events.append(("fix", {"type": "fix", "fix": body}))
         self._release()
         live_now = self.tracker.tracks(include_ended=False)
-        ended_ids = self._live_ids - {t.id for t in live_now}
+        live_ids = {t.id for t in live_now}
+        ended_ids = self._live_ids - live_ids
         changed = live_now
         if ended_ids:  # rare: read the ended tracks' final form once
-            changed = [t for t in self.tracker.tracks() if t.id in ended_ids] + live_now
-        track_rows, track_events = self._track_changes(changed)
+            recent = self.tracker.tracks(ended_after_s=self._sent_since(ended_ids))
+            changed = [t for t in recent if t.id in ended_ids] + live_now
+        track_rows, track_events = self._track_changes(changed, live_ids=live_ids)
         events += track_events
         activity = [p["event"] for kind, p in track_events if kind == "event"]
         if self.live_events is not None and math.isfinite(self._released_t):
@@ -375,10 +521,21 @@ class Pipeline:
             events.append(("event", {"type": "event", "kind": "ingest", "t_s": t, "text": text}))
         seqs = self.store.write_derived(rows, track_rows, events, activity=activity)
         self.publish([{**p, "seq": s} for (_, p), s in zip(events, seqs, strict=True)])
+        self._drop_ended()  # after their final rows are stored
 
     def _window_tracks(self, t_from: float) -> list[Track]:
         """Tracks with a point at or after ``t_from`` (live ones and recently ended)."""
-        return [t for t in self.tracker.tracks() if t.points and t.points[-1].t_s >= t_from]
+        tracks = self.tracker.tracks(ended_after_s=t_from)
+        return [t for t in tracks if t.points and t.points[-1].t_s >= t_from]
+
+    def _sent_since(self, ids: set[int]) -> float:
+        """The earliest newest-point time of the tracks ``ids`` as last sent (-inf if unknown).
+
+        A track only gains points, so its final form ends at or after that time: reading
+        the ended tracks from there on avoids rebuilding every track the session ever had.
+        """
+        ends = [self._points[i][1][-1]["t_s"] for i in ids if self._points.get(i, (0, []))[1]]
+        return min(ends) if len(ends) == len(ids) else -math.inf
 
     def _fix_bodies(
         self, pending: list[tuple[int, Detection]], fixes: list[Fix]
@@ -411,6 +568,7 @@ class Pipeline:
                 road = _hit(fix.road_hit_enu.tolist(), sigma, geo[k])
                 k += 1
             u0, _, u1, v1 = d.bbox
+            self._queued_fixes[det_id] = _stored_fix(det_id, d, fix)
             out.append(
                 {
                     "detection_id": det_id,
@@ -480,10 +638,14 @@ class Pipeline:
         }
 
     def _track_changes(
-        self, tracks: Sequence[Track], force: bool = False
+        self, tracks: Sequence[Track], force: bool = False, live_ids: set[int] | None = None
     ) -> tuple[list[dict[str, Any]], list[tuple[str, dict[str, Any]]]]:
-        """Of ``tracks``, those that changed since the last call: table rows and messages."""
-        live_ids = {t.id for t in self.tracker.tracks(include_ended=False)}
+        """Of ``tracks``, those that changed since the last call: table rows and messages.
+
+        ``live_ids``: the ids of the tracker's live tracks, when the caller has them.
+        """
+        if live_ids is None:
+            live_ids = {t.id for t in self.tracker.tracks(include_ended=False)}
         self._live_ids = live_ids
         lag = int(getattr(self.tracker.config, "smoothing_lag", 0))
         rows, events = [], []

@@ -15,7 +15,9 @@ clock instead of drifting behind it.
 Several scenarios play at once, each looping on its own period (its span plus a gap) so
 the console always has something moving. Times are shifted so they start after the
 newest time already stored (the ingest refuses a sensor's time going backwards) and grow
-from loop to loop.
+from loop to loop. For a busier scene (the console's soak benchmark keeps about 20 tracks
+alive), each scenario can play as several copies staggered over its period, each with its
+own noise seed; the cameras' frame rate and the replayed duration can be chosen too.
 """
 
 from __future__ import annotations
@@ -170,26 +172,51 @@ def scenario_stream(
     *,
     loop: bool = True,
     gap_s: float = LOOP_GAP_S,
+    copies: int = 1,
+    rate_hz: float | None = None,
+    duration_s: float | None = None,
 ) -> Iterator[ReplayFrame]:
     """Frames of the named sample-site scenarios played together from ``t0_s``.
 
     Each scenario is generated (:func:`~demtrack.samplesite.scenarios.make_scenario`,
-    default noise and seed; about a second each) and loops on its own period.
+    default noise; about a second each) and loops on its own period.
+
+    Parameters
+    ----------
+    copies : int
+        Copies of each scenario, copy ``k`` made with noise seed ``k`` and started
+        ``k / copies`` of the scenario's period (span plus ``gap_s``) after copy 0,
+        rounded to a whole frame so the copies' frames share batches.
+    rate_hz : float, optional
+        The cameras' frame rate (default: the scenarios' own, 10 Hz).
+    duration_s : float, optional
+        Stop after this much replayed time (s after ``t0_s``); default: no end.
 
     Raises
     ------
     SiteError
         An unknown scenario, or a site that is not a generated sample site.
+    ValueError
+        ``copies`` below 1.
     """
-    from demtrack.samplesite.scenarios import make_scenario
+    from demtrack.samplesite.scenarios import ScenarioParams, make_scenario
 
-    streams = [
-        loop_frames(
-            scenario_frames(make_scenario(site, name).detections), t0_s, loop=loop, gap_s=gap_s
-        )
-        for name in names
-    ]
-    return merge_frames(streams)
+    if copies < 1:
+        raise ValueError(f"replay copies must be at least 1, got {copies}")
+    streams = []
+    for name in names:
+        for k in range(copies):
+            params = ScenarioParams(seed=k, **({} if rate_hz is None else {"rate_hz": rate_hz}))
+            frames = scenario_frames(make_scenario(site, name, params).detections)
+            if not frames:
+                continue
+            period = max(frames[-1].t_s, 0.0) + gap_s
+            offset = round(k * period / copies * params.rate_hz) / params.rate_hz
+            streams.append(loop_frames(frames, t0_s + offset, loop=loop, gap_s=gap_s))
+    merged = merge_frames(streams)
+    if duration_s is None:
+        return merged
+    return itertools.takewhile(lambda f: f.t_s < t0_s + duration_s, merged)
 
 
 class Replay:

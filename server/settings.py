@@ -53,6 +53,13 @@ class Settings(BaseSettings):
         Replay speed, times real time.
     replay_loop : bool
         Repeat the scenarios forever (else play them once).
+    replay_copies : int
+        Copies of each replayed scenario, staggered over its period, each with its own
+        noise seed (a busier scene: 4 copies of all three keep about 20 tracks alive).
+    replay_rate_hz : float
+        The replayed cameras' frame rate (Hz).
+    replay_duration_s : float
+        Stop the replay after this much scenario time (s); 0 for no end.
     scene3d : bool
         Serve the viser 3D scene on its own port.
     viser_host : str
@@ -65,6 +72,10 @@ class Settings(BaseSettings):
         Fixes wait this long (scenario time, behind the newest fix) in a reorder buffer so
         slightly out-of-order batches from several cameras are tracked in time order; a
         fix older than what was already tracked is stored with ``tracked: false``.
+    track_retain_s : float
+        The live tracker forgets a track that ended more than this long ago (scenario
+        time; it stays in SQLite and the API). At least the re-acquisition window (30 s)
+        and, with live events, ``events_window_s`` are kept whatever this says.
     events : bool
         Run the activity detectors and hand-off prediction on the live tracks.
     events_every_s, events_window_s, events_sample_s : float
@@ -102,11 +113,15 @@ class Settings(BaseSettings):
     replay: Annotated[list[str], NoDecode] = Field(default_factory=list)
     replay_speed: float = Field(default=1.0, gt=0, allow_inf_nan=False)
     replay_loop: bool = True
+    replay_copies: int = Field(default=1, ge=1, le=100)
+    replay_rate_hz: float = Field(default=10.0, gt=0, le=100, allow_inf_nan=False)
+    replay_duration_s: float = Field(default=0.0, ge=0, allow_inf_nan=False)
     scene3d: bool = False
     viser_host: str = "127.0.0.1"
     viser_port: int = Field(default=8080, ge=0, le=65535)
     scene3d_rays: int = Field(default=40, ge=1, le=1000)
     reorder_lag_s: float = Field(default=0.5, ge=0, le=60, allow_inf_nan=False)
+    track_retain_s: float = Field(default=600.0, ge=0, allow_inf_nan=False)
     events: bool = True
     events_every_s: float = Field(default=1.0, gt=0, le=3600, allow_inf_nan=False)
     events_window_s: float = Field(default=180.0, gt=0, le=86400, allow_inf_nan=False)

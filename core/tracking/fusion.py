@@ -107,8 +107,14 @@ def triangulate_fixes(fix_a: Fix, fix_b: Fix, config: TrackerConfig) -> Fix | No
     return None if out is None else out[0]
 
 
-def _triangulate(fix_a: Fix, fix_b: Fix, config: TrackerConfig) -> tuple[Fix, float] | None:
-    """Do :func:`triangulate_fixes`, also returning the miss distance (m)."""
+def _triangulate(
+    fix_a: Fix, fix_b: Fix, config: TrackerConfig, screened: bool = False
+) -> tuple[Fix, float] | None:
+    """Do :func:`triangulate_fixes`, also returning the miss distance (m).
+
+    ``screened``: :func:`_screen_pairs` found the pair clear of every threshold, so the
+    hit checks are not repeated (the numbers are computed exactly as without it).
+    """
     if fix_a.cls != fix_b.cls or fix_a.sensor == fix_b.sensor:
         return None
     ra = closest_approach(
@@ -122,7 +128,9 @@ def _triangulate(fix_a: Fix, fix_b: Fix, config: TrackerConfig) -> tuple[Fix, fl
     if ra.miss_m > config.fusion_max_miss_m or ra.range_a_m <= 0 or ra.range_b_m <= 0:
         return None
     gate = config.fusion_hit_gate_sigma
-    if not (_near_a_hit(ra.p_enu, fix_a, gate) and _near_a_hit(ra.p_enu, fix_b, gate)):
+    if not screened and not (
+        _near_a_hit(ra.p_enu, fix_a, gate) and _near_a_hit(ra.p_enu, fix_b, gate)
+    ):
         return None
     sa = config.ray_sigma_rad * ra.range_a_m
     sb = config.ray_sigma_rad * ra.range_b_m
@@ -136,20 +144,64 @@ def _triangulate(fix_a: Fix, fix_b: Fix, config: TrackerConfig) -> tuple[Fix, fl
     sigma = math.sqrt(float(np.linalg.eigvalsh(cov)[-1]))
     road = ra.p_enu if (fix_a.road_hit_enu is not None or fix_b.road_hit_enu is not None) else None
     scores = [s for s in (fix_a.score, fix_b.score) if s is not None]
-    fused = Fix(
-        t_s=0.5 * (fix_a.t_s + fix_b.t_s),
-        sensor="+".join(sorted((fix_a.sensor, fix_b.sensor))),
-        cls=fix_a.cls,
-        detection_index=fix_a.detection_index,
-        origin_enu=fix_a.origin_enu,
-        direction_enu=fix_a.direction_enu,
-        hits_enu=ra.p_enu[None, :],
-        hit_sigma_m=np.array([sigma]),
-        road_hit_enu=road,
-        score=max(scores) if scores else None,
-        hit_cov_en_m2=cov[None],
+    args = (
+        0.5 * (fix_a.t_s + fix_b.t_s),
+        "+".join(sorted((fix_a.sensor, fix_b.sensor))),
+        fix_a.cls,
+        fix_a.detection_index,
+        fix_a.origin_enu,
+        fix_a.direction_enu,
+        ra.p_enu[None, :],
+        np.array([sigma]),
+        road,
+        max(scores) if scores else None,
+        cov[None],
     )
-    return fused, ra.miss_m
+    return _fused_fix(*args), ra.miss_m
+
+
+def _fused_fix(
+    t_s: float,
+    sensor: str,
+    cls: str,
+    index: int,
+    origin: np.ndarray,
+    direction: np.ndarray,
+    hits: np.ndarray,
+    sigma: np.ndarray,
+    road: np.ndarray | None,
+    score: float | None,
+    cov: np.ndarray,
+) -> Fix:
+    """The triangulated :class:`Fix`, as its public constructor would make it.
+
+    The inputs come from checked fixes and are finite by construction; what the
+    constructor would do to them (copy, renormalise the direction, symmetrise the
+    covariance - already symmetric) is done here without its checks. Anything unusual
+    (a non-finite value, a covariance that is not positive definite) goes through the
+    constructor, which says what is wrong.
+    """
+    det = cov[0, 0, 0] * cov[0, 1, 1] - cov[0, 0, 1] * cov[0, 1, 0]
+    if not (
+        math.isfinite(t_s)
+        and np.isfinite(hits).all()
+        and math.isfinite(float(sigma[0]))
+        and sigma[0] > 0
+        and np.isfinite(cov).all()
+        and cov[0, 0, 1] == cov[0, 1, 0]
+        and cov[0, 0, 0] > 0
+        and det > 0
+    ):
+        return Fix(t_s, sensor, cls, index, origin, direction, hits, sigma, road, score, cov)  # type: ignore[arg-type]
+    unit = np.array(direction, dtype=np.float64)
+    unit /= float(np.linalg.norm(unit))
+    road_copy = None if road is None else np.array(road, dtype=np.float64)
+    hits = np.array(hits, dtype=np.float64)
+    arrays = (unit, road_copy, hits, sigma, cov)
+    for a in arrays:
+        if a is not None:
+            a.setflags(write=False)
+    return Fix._trusted(t_s, sensor, cls, index, origin, unit, hits, sigma, road_copy, score, cov)  # type: ignore[arg-type]
 
 
 def _across(fix: Fix) -> np.ndarray:
@@ -214,6 +266,12 @@ def fuse_measurements(
         Fused measurements (in time order) followed by the unpaired ones (input order).
         Each input is used at most once; with three or more sensors, sensor pairs are
         taken in name order.
+
+    Notes
+    -----
+    The checks of :func:`triangulate_fixes` are screened for all pairs of a sensor pair
+    at once (:func:`_screen_pairs`); only pairs within round-off of a threshold go
+    through the scalar checks, and only the pairs finally matched are triangulated.
     """
     by_sensor: dict[str, list[int]] = {}
     for i, m in enumerate(measurements):
@@ -227,26 +285,238 @@ def fuse_measurements(
             right = [j for j in by_sensor[sb] if j not in used]
             if not left or not right:
                 continue
-            cost = np.full((len(left), len(right)), np.inf)
-            cand: dict[tuple[int, int], Fix] = {}
-            for r, i in enumerate(left):
-                for c, j in enumerate(right):
-                    fa, fb = measurements[i].fix, measurements[j].fix
-                    if abs(fa.t_s - fb.t_s) > config.step_window_s:
-                        continue
-                    tri = _triangulate(fa, fb, config)
-                    if tri is not None:
-                        cand[(r, c)], cost[r, c] = tri
-            if not cand:
-                continue
-            finite = np.where(np.isfinite(cost), cost, 1e18)
-            for r, c in zip(*linear_sum_assignment(finite), strict=True):
-                if (r, c) in cand:
-                    i, j = left[r], right[c]
-                    used.update((i, j))
-                    mi, mj = measurements[i], measurements[j]
-                    fused.append(
-                        Measurement(cand[(r, c)], mi.indices + mj.indices, mi.sensors + mj.sensors)
-                    )
+            fa = [measurements[i].fix for i in left]
+            fb = [measurements[j].fix for j in right]
+            if len(fa) * len(fb) <= _SCALAR_PAIRS:
+                pairs = _pair_scalar(fa, fb, config)
+            else:
+                pairs = _pair_vectorised(fa, fb, config)
+            for r, c, tri in pairs:
+                i, j = left[r], right[c]
+                used.update((i, j))
+                mi, mj = measurements[i], measurements[j]
+                fused.append(Measurement(tri[0], mi.indices + mj.indices, mi.sensors + mj.sensors))
     fused.sort(key=lambda m: m.t_s)
     return fused + [m for i, m in enumerate(measurements) if i not in used]
+
+
+#: Up to this many (a, b) pairs a sensor pair is fused pair by pair (less overhead).
+_SCALAR_PAIRS = 4
+
+
+def _pair_scalar(
+    fa: Sequence[Fix], fb: Sequence[Fix], config: TrackerConfig
+) -> list[tuple[int, int, tuple[Fix, float]]]:
+    """Matched ``(row, col, (fused fix, miss))``: every pair triangulated, then assigned."""
+    cost = np.full((len(fa), len(fb)), np.inf)
+    cand: dict[tuple[int, int], tuple[Fix, float]] = {}
+    for r, a in enumerate(fa):
+        for c, b in enumerate(fb):
+            if abs(a.t_s - b.t_s) > config.step_window_s:
+                continue
+            tri = _triangulate(a, b, config)
+            if tri is not None:
+                cand[(r, c)] = tri
+                cost[r, c] = tri[1]
+    if not cand:
+        return []
+    finite = np.where(np.isfinite(cost), cost, 1e18)
+    rows, cols = linear_sum_assignment(finite)
+    return [
+        (r, c, cand[(r, c)])
+        for r, c in zip(rows.tolist(), cols.tolist(), strict=True)
+        if (r, c) in cand
+    ]
+
+
+def _pair_vectorised(
+    fa: Sequence[Fix], fb: Sequence[Fix], config: TrackerConfig
+) -> list[tuple[int, int, tuple[Fix, float]]]:
+    """:func:`_pair_scalar` with the checks and the matched triangulations vectorised."""
+    out: list[tuple[int, int, tuple[Fix, float]]] = []
+    screen = _screen_pairs(fa, fb, config)
+    ok = np.isfinite(screen.cost)
+    if not ok.any():
+        return out
+    finite = np.where(ok, screen.cost, 1e18)
+    rows, cols = linear_sum_assignment(finite)
+    keep = ok[rows, cols]
+    rows, cols = rows[keep], cols[keep]
+    clear = screen.clear[rows, cols]
+    made = dict(
+        zip(
+            zip(rows[clear].tolist(), cols[clear].tolist(), strict=True),
+            _triangulate_screened(fa, fb, rows[clear], cols[clear], screen, config),
+            strict=True,
+        )
+    )
+    for r, c in zip(rows.tolist(), cols.tolist(), strict=True):
+        tri = made.get((r, c)) or _triangulate(fa[r], fb[c], config)
+        if tri is not None:  # None: only a pair at a threshold's round-off
+            out.append((r, c, tri))
+    return out
+
+
+#: Slack (m, or unitless for the angle terms) within which a vectorised check is redone
+#: by the scalar one, so round-off never changes which pairs are accepted.
+_SCREEN_TOL = 1e-6
+
+
+def _padded_hits(fixes: Sequence[Fix]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Hits (n, k, 2), their sigmas (n, k) and covariances (n, k, 2, 2), NaN-padded."""
+    k = max((f.n_hits for f in fixes), default=0)
+    xy = np.full((len(fixes), max(k, 1), 2), np.nan)
+    sig = np.full((len(fixes), max(k, 1)), np.nan)
+    cov = np.full((len(fixes), max(k, 1), 2, 2), np.nan)
+    for r, f in enumerate(fixes):
+        xy[r, : f.n_hits] = f.hits_enu[:, :2]
+        sig[r, : f.n_hits] = f.hit_sigma_m
+        cov[r, : f.n_hits] = f.hit_covariances()
+    return xy, sig, cov
+
+
+@dataclass(frozen=True, eq=False)
+class _Screen:
+    """What :func:`_screen_pairs` finds for the (a, b) pairs of a sensor pair.
+
+    ``cost``: miss distance (m) of pairs that pass, else inf; ``clear``: passed every
+    check by more than :data:`_SCREEN_TOL`; ``p_enu`` (.., 3), ``range_a``, ``range_b``
+    (m), ``sin_angle``: the closest approach; ``hits_a``/``hits_b``: padded hit positions
+    and covariances of each side's fixes.
+    """
+
+    cost: np.ndarray
+    clear: np.ndarray
+    p_enu: np.ndarray
+    miss: np.ndarray
+    range_a: np.ndarray
+    range_b: np.ndarray
+    sin_angle: np.ndarray
+    hits_a: tuple[np.ndarray, np.ndarray]
+    hits_b: tuple[np.ndarray, np.ndarray]
+
+
+def _screen_pairs(fa: Sequence[Fix], fb: Sequence[Fix], config: TrackerConfig) -> _Screen:
+    """The triangulation checks of every (a, b) pair, vectorised (see :class:`_Screen`).
+
+    Arrays are ``(len(fa), len(fb))``. The checks of :func:`_triangulate`; a pair within
+    :data:`_SCREEN_TOL` of any threshold is decided by :func:`_triangulate` itself.
+    """
+    oa = np.array([f.origin_enu for f in fa])
+    da = np.array([f.direction_enu for f in fa])
+    ob = np.array([f.origin_enu for f in fb])
+    db = np.array([f.direction_enu for f in fb])
+    ta = np.array([f.t_s for f in fa])
+    tb = np.array([f.t_s for f in fb])
+    ca = np.array([f.cls for f in fa])
+    cb = np.array([f.cls for f in fb])
+    same = (ca[:, None] == cb[None, :]) & (
+        np.abs(ta[:, None] - tb[None, :]) <= config.step_window_s
+    )
+    b = da @ db.T
+    denom = 1.0 - b * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w0 = oa[:, None, :] - ob[None, :, :]
+        d = np.einsum("ik,ijk->ij", da, w0)
+        e = np.einsum("jk,ijk->ij", db, w0)
+        s = (b * e - d) / denom
+        t = (e - b * d) / denom
+        pa = oa[:, None, :] + s[..., None] * da[:, None, :]
+        pb = ob[None, :, :] + t[..., None] * db[None, :, :]
+        p = 0.5 * (pa + pb)
+        miss = np.linalg.norm(pa - pb, axis=-1)
+        sin_angle = np.sin(np.arccos(np.clip(b, -1.0, 1.0)))
+        gate = config.fusion_hit_gate_sigma
+        hxa, sga, cva = _padded_hits(fa)
+        hxb, sgb, cvb = _padded_hits(fb)
+        dist_a = np.linalg.norm(hxa[:, None, :, :] - p[:, :, None, :2], axis=-1)
+        dist_b = np.linalg.norm(hxb[None, :, :, :] - p[:, :, None, :2], axis=-1)
+        near_a = np.nanmax(gate * sga[:, None, :] + 1.0 - dist_a, axis=-1, initial=-np.inf)
+        near_b = np.nanmax(gate * sgb[None, :, :] + 1.0 - dist_b, axis=-1, initial=-np.inf)
+        slack = np.stack(
+            [
+                denom - 1e-12,
+                sin_angle - math.sin(math.radians(config.fusion_min_angle_deg)),
+                config.fusion_max_miss_m - miss,
+                s,
+                t,
+                near_a,
+                near_b,
+            ]
+        )
+    slack = np.where(np.isnan(slack), -np.inf, slack)
+    worst = slack.min(axis=0)
+    clear = same & (worst > _SCREEN_TOL)
+    cost = np.where(clear, miss, np.inf)
+    for r, c in zip(*np.nonzero(same & (np.abs(worst) <= _SCREEN_TOL)), strict=True):
+        tri = _triangulate(fa[r], fb[c], config)
+        if tri is not None:
+            cost[r, c] = tri[1]
+    return _Screen(cost, clear, p, miss, s, t, sin_angle, (hxa, cva), (hxb, cvb))
+
+
+def _triangulate_screened(
+    fa: Sequence[Fix],
+    fb: Sequence[Fix],
+    rows: np.ndarray,
+    cols: np.ndarray,
+    screen: _Screen,
+    config: TrackerConfig,
+) -> list[tuple[Fix, float]]:
+    """:func:`_triangulate` of the pairs ``(fa[rows[k]], fb[cols[k]])``, all at once.
+
+    For pairs that cleared the screen: the same formulas on the screen's arrays (equal
+    to the scalar ones up to float round-off).
+    """
+    if len(rows) == 0:
+        return []
+    p = screen.p_enu[rows, cols]
+    miss = screen.miss[rows, cols]
+    sin_angle = screen.sin_angle[rows, cols]
+    sa = config.ray_sigma_rad * screen.range_a[rows, cols]
+    sb = config.ray_sigma_rad * screen.range_b[rows, cols]
+    worst = np.sqrt(0.5 * (sa * sa + sb * sb)) / sin_angle
+    info = np.eye(2)[None] / (worst * worst)[:, None, None]
+    for side, fixes, idx, s in (("a", fa, rows, sa), ("b", fb, cols, sb)):
+        g = np.array([fixes[i].direction_enu[:2] for i in idx.tolist()])
+        norm = np.hypot(g[:, 0], g[:, 1])
+        vertical = norm < 1e-9
+        n = np.where(
+            vertical[:, None],
+            np.array([1.0, 0.0]),
+            np.stack([-g[:, 1], g[:, 0]], axis=1) / np.where(vertical, 1.0, norm)[:, None],
+        )
+        hits_xy, hits_cov = screen.hits_a if side == "a" else screen.hits_b
+        d2 = np.sum((hits_xy[idx] - p[:, None, :2]) ** 2, axis=2)
+        j = np.argmin(np.where(np.isnan(d2), np.inf, d2), axis=1)
+        c = hits_cov[idx, j]
+        var = np.einsum("ki,kij,kj->k", n, c, n)
+        s = np.maximum(s, np.sqrt(var))
+        nn = n[:, :, None] * n[:, None, :]
+        info += np.where(vertical[:, None, None], np.eye(2)[None], nn) / (s * s)[:, None, None]
+    cov = np.linalg.inv(info)
+    cov = 0.5 * (cov + np.swapaxes(cov, 1, 2))
+    cov += (np.maximum(0.5 * miss, 0.05) ** 2)[:, None, None] * np.eye(2)[None]
+    half_tr = 0.5 * (cov[:, 0, 0] + cov[:, 1, 1])
+    half_diff = 0.5 * (cov[:, 0, 0] - cov[:, 1, 1])
+    sigma = np.sqrt(half_tr + np.hypot(half_diff, cov[:, 0, 1]))
+    out = []
+    for k, (r, c) in enumerate(zip(rows.tolist(), cols.tolist(), strict=True)):
+        a, b = fa[r], fb[c]
+        road = p[k] if (a.road_hit_enu is not None or b.road_hit_enu is not None) else None
+        scores = [v for v in (a.score, b.score) if v is not None]
+        fix = _fused_fix(
+            0.5 * (a.t_s + b.t_s),
+            "+".join(sorted((a.sensor, b.sensor))),
+            a.cls,
+            a.detection_index,
+            a.origin_enu,
+            a.direction_enu,
+            p[k][None, :],
+            np.array([sigma[k]]),
+            road,
+            max(scores) if scores else None,
+            cov[k][None],
+        )
+        out.append((fix, float(miss[k])))
+    return out

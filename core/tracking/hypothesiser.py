@@ -4,10 +4,15 @@ For a fix with several hits, the cost of the fix to a track is the best hit's sq
 Mahalanobis distance ``d2 = nu^T (P + R)^-1 nu`` (``P`` the predicted horizontal
 covariance, ``R`` the hit's, elongated along its ray). A fix none of whose hits is
 inside the gate yields no hypothesis, so the track's only option for it is the missed detection.
+
+:class:`CandidateBlock` stacks the candidates of every measurement of a scan so that
+:meth:`GatedNearestHit.hypothesise_block` gates one track against all of them with one
+batched solve (the same LAPACK solve per candidate as :meth:`GatedNearestHit.hypothesise`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,7 +21,7 @@ from scipy.stats import chi2
 from ..errors import TrackingError
 from .protocols import Candidates, SingleHypothesis
 
-__all__ = ["GatedNearestHit", "gate_d2"]
+__all__ = ["CandidateBlock", "GatedNearestHit", "gate_d2"]
 
 
 def gate_d2(probability: float) -> float:
@@ -24,6 +29,48 @@ def gate_d2(probability: float) -> float:
     if not 0.0 < probability < 1.0:
         raise TrackingError(f"gate probability must be in (0, 1), got {probability}")
     return float(chi2.ppf(probability, df=2))
+
+
+@dataclass(frozen=True, eq=False)
+class CandidateBlock:
+    """The candidates of several measurements, stacked (one scan's, for batched gating).
+
+    Parameters
+    ----------
+    z_xy : ndarray, shape (c, 2)
+        Every candidate's horizontal position, measurement after measurement (m).
+    cov : ndarray, shape (c, 2, 2)
+        Their horizontal covariances (m^2).
+    slots : ndarray of int, shape (n, k)
+        Row ``j``: the rows of measurement ``j``'s candidates, padded with ``c`` (a slot
+        that is never nearest).
+    """
+
+    z_xy: np.ndarray
+    cov: np.ndarray
+    slots: np.ndarray
+
+    @classmethod
+    def stack(cls, cands: Sequence[Candidates]) -> CandidateBlock:
+        """Stack the candidates of measurements ``0 .. n-1`` (each with ``size >= 1``)."""
+        sizes = [c.size for c in cands]
+        total = sum(sizes)
+        width = max(sizes, default=1)
+        slots = np.full((len(cands), width), total, dtype=np.intp)
+        start = 0
+        for j, m in enumerate(sizes):
+            slots[j, :m] = np.arange(start, start + m)
+            start += m
+        if not cands:
+            return cls(np.zeros((0, 2)), np.zeros((0, 2, 2)), slots)
+        z = np.concatenate([c.z_enu[:, :2] for c in cands])
+        cov = np.concatenate([c.covariances() for c in cands])
+        return cls(z, cov, slots)
+
+    @property
+    def n_measurements(self) -> int:
+        """Number of stacked measurements ``n``."""
+        return int(self.slots.shape[0])
 
 
 @dataclass(frozen=True)
@@ -56,3 +103,49 @@ class GatedNearestHit:
         if not d2[j] <= self.gate_d2:
             return None
         return SingleHypothesis(measurement_index, j, float(d2[j]))
+
+    def hypothesise_block(
+        self, mean_xy: np.ndarray, cov_xy: np.ndarray, block: CandidateBlock, allowed: np.ndarray
+    ) -> list[SingleHypothesis | None]:
+        """:meth:`hypothesise` for every stacked measurement at once.
+
+        Parameters
+        ----------
+        mean_xy, cov_xy : ndarray, shapes (2,) and (2, 2)
+            The track's predicted horizontal position (m) and covariance (m^2).
+        block : CandidateBlock
+            The measurements' candidates.
+        allowed : ndarray of bool, shape (n,)
+            Measurements the track may take (None for the others).
+
+        Returns
+        -------
+        list of SingleHypothesis or None
+            Entry ``j`` is what ``hypothesise(mean_xy, cov_xy, cands_j, j)`` returns.
+        """
+        return self.hypothesise_tracks(mean_xy[None], cov_xy[None], block, allowed[None])[0]
+
+    def hypothesise_tracks(
+        self, means_xy: np.ndarray, covs_xy: np.ndarray, block: CandidateBlock, allowed: np.ndarray
+    ) -> list[list[SingleHypothesis | None]]:
+        """:meth:`hypothesise_block` for several tracks at once, one row per track.
+
+        ``means_xy`` is (t, 2), ``covs_xy`` (t, 2, 2) and ``allowed`` (t, n). One
+        batched solve for every (track, candidate) pair; each is the same LAPACK solve
+        :meth:`distances2` makes, so the distances are the same to the last bit.
+        """
+        n_tracks, n = allowed.shape
+        out: list[list[SingleHypothesis | None]] = [[None] * n for _ in range(n_tracks)]
+        if n_tracks == 0 or not np.any(allowed):
+            return out
+        s = covs_xy[:, None, :, :] + block.cov[None, :, :, :]
+        nu = block.z_xy[None, :, :] - means_xy[:, None, :]
+        x = np.linalg.solve(s, nu[..., None])[..., 0]
+        d2 = nu[..., 0] * x[..., 0] + nu[..., 1] * x[..., 1]
+        d2 = np.concatenate([d2, np.full((n_tracks, 1), np.inf)], axis=1)[:, block.slots]
+        best = np.argmin(d2, axis=2)
+        d2_best = np.take_along_axis(d2, best[..., None], axis=2)[..., 0]
+        hit = allowed & (d2_best <= self.gate_d2)
+        for i, j in zip(*np.nonzero(hit), strict=True):
+            out[i][j] = SingleHypothesis(int(j), int(best[i, j]), float(d2_best[i, j]))
+        return out

@@ -10,7 +10,7 @@ matching, so a tree-crown hit far from the prediction barely moves the track.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -38,6 +38,12 @@ class GaussianState:
     history : tuple of (float, ndarray, ndarray)
         Filtered ``(t_s, x, P)`` at the last few measurement times (oldest first), for
         the fixed-lag Rauch-Tung-Striebel smoother of :meth:`KalmanFilter.revise`.
+    gains : tuple of (ndarray, ndarray)
+        Smoother step ``(F, G)`` from each history entry but the newest to the next one
+        (``F`` the transition over their interval, ``G = P_k F^T P_pred^-1``; each (4, 4)),
+        aligned with ``history[:-1]``; computed once, when the next entry is remembered,
+        since neither changes afterwards. Empty (or misaligned): :meth:`KalmanFilter.revise`
+        computes them itself.
     """
 
     t_s: float
@@ -45,6 +51,7 @@ class GaussianState:
     P: np.ndarray
     z_m: float
     history: tuple[tuple[float, np.ndarray, np.ndarray], ...] = ()
+    gains: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
 
 
 def _kalman(x: np.ndarray, p: np.ndarray, z_xy: np.ndarray, r: np.ndarray) -> tuple:
@@ -84,8 +91,23 @@ class KalmanFilter:
     def _remember(self, state: GaussianState) -> GaussianState:
         if self.history_len <= 0:
             return state
+        gains = state.gains if len(state.gains) == len(state.history) - 1 else None
+        if gains is not None and state.history:
+            gains = (*gains, self._smoother_step(state.history[-1], state.t_s))
         hist = (*state.history, (state.t_s, state.x, state.P))[-self.history_len :]
-        return replace(state, history=hist)
+        kept = gains[-(len(hist) - 1) :] if gains is not None and len(hist) > 1 else ()
+        return GaussianState(state.t_s, state.x, state.P, state.z_m, hist, kept)
+
+    def _smoother_step(
+        self, entry: tuple[float, np.ndarray, np.ndarray], t_next: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """RTS step ``(F, G)`` from a filtered history ``entry`` to time ``t_next`` (s)."""
+        t_k, _, p_k = entry
+        dt = t_next - t_k
+        f = self.motion.transition(dt)
+        p_pred = f @ p_k @ f.T + self.motion.covariance(dt)
+        gain = np.linalg.solve(p_pred, f @ p_k).T  # P_k F^T P_pred^-1
+        return f, gain
 
     def initiate(
         self, cands: Candidates, which: int | None, t_s: float, rng: np.random.Generator
@@ -111,7 +133,9 @@ class KalmanFilter:
             return state
         f = self.motion.transition(dt)
         p = f @ state.P @ f.T + self.motion.covariance(dt)
-        return GaussianState(t_s, f @ state.x, 0.5 * (p + p.T), state.z_m, state.history)
+        return GaussianState(
+            t_s, f @ state.x, 0.5 * (p + p.T), state.z_m, state.history, state.gains
+        )
 
     def gaussian(self, state: GaussianState) -> tuple[np.ndarray, np.ndarray]:
         """Horizontal position mean (2,) and covariance (2, 2)."""
@@ -123,7 +147,8 @@ class KalmanFilter:
         """Update with candidate ``chosen``, or with all of them (PDA) for a mixture."""
         if not cands.mixture:
             x, p = _kalman(state.x, state.P, cands.z_enu[chosen, :2], cands.cov(chosen))
-            out = GaussianState(state.t_s, x, p, float(cands.z_enu[chosen, 2]), state.history)
+            z = float(cands.z_enu[chosen, 2])
+            out = GaussianState(state.t_s, x, p, z, state.history, state.gains)
         else:
             out = self._pda(state, cands)
         return self._remember(out)
@@ -151,7 +176,7 @@ class KalmanFilter:
             p += beta[j] * (ps[j] + np.outer(dj, dj))
         best = int(np.argmax(beta))
         z = float(cands.z_enu[best, 2]) if beta[best] > beta0 else state.z_m
-        return GaussianState(state.t_s, x, 0.5 * (p + p.T), z, state.history)
+        return GaussianState(state.t_s, x, 0.5 * (p + p.T), z, state.history, state.gains)
 
     def revise(self, state: GaussianState, n: int) -> list[np.ndarray]:
         """Smooth the last ``n`` measurement times (fixed-lag Rauch-Tung-Striebel).
@@ -162,16 +187,17 @@ class KalmanFilter:
         hist = state.history[-n:] if n > 0 else ()
         if not hist:
             return []
-        t_next, xs, _ = hist[-1]
+        if len(state.gains) == len(state.history) - 1:
+            steps = state.gains[len(state.gains) - (len(hist) - 1) :]
+        else:
+            steps = tuple(
+                self._smoother_step(hist[k], hist[k + 1][0]) for k in range(len(hist) - 1)
+            )
+        xs = hist[-1][1]
         out = [xs[:2].copy()]
-        for t_k, x_k, p_k in reversed(hist[:-1]):
-            dt = t_next - t_k
-            f = self.motion.transition(dt)
-            p_pred = f @ p_k @ f.T + self.motion.covariance(dt)
-            gain = np.linalg.solve(p_pred, f @ p_k).T  # P_k F^T P_pred^-1
+        for (_, x_k, _), (f, gain) in zip(reversed(hist[:-1]), reversed(steps), strict=True):
             xs = x_k + gain @ (xs - f @ x_k)
             out.append(xs[:2].copy())
-            t_next = t_k
         return out[::-1]
 
     def density(self, state: GaussianState, xy: np.ndarray, cov_xy: np.ndarray) -> float:

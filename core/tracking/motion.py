@@ -11,6 +11,7 @@ Heights are not modelled: a track's ``z`` comes from the terrain hit it used.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -44,22 +45,33 @@ class ConstantVelocity:
             raise TrackingError(f"q_m2_s3 must be positive, got {self.q_m2_s3}")
 
     def transition(self, dt_s: float) -> np.ndarray:
-        """State transition matrix F, shape (4, 4)."""
-        f = np.eye(4)
-        f[0, 2] = f[1, 3] = dt_s
-        return f
+        """State transition matrix F, shape (4, 4) (read-only; shared between calls)."""
+        return _cv_matrices(self.q_m2_s3, float(dt_s))[0]
 
     def covariance(self, dt_s: float) -> np.ndarray:
-        """Process noise covariance Q, shape (4, 4)."""
-        q = self.q_m2_s3
-        axis = q * np.array([[dt_s**3 / 3.0, dt_s**2 / 2.0], [dt_s**2 / 2.0, dt_s]])
-        out = np.zeros((4, 4))
-        for k in (0, 1):  # x with vx, y with vy
-            out[k, k] = axis[0, 0]
-            out[k, k + 2] = axis[0, 1]
-            out[k + 2, k] = axis[1, 0]
-            out[k + 2, k + 2] = axis[1, 1]
-        return out
+        """Process noise covariance Q, shape (4, 4) (read-only; shared between calls)."""
+        return _cv_matrices(self.q_m2_s3, float(dt_s))[1]
+
+
+@functools.lru_cache(maxsize=4096)
+def _cv_matrices(q: float, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """F and Q of :class:`ConstantVelocity` (each (4, 4), read-only).
+
+    Cached: a tracker predicts every track to each scan's time, and frame-synchronous
+    cameras make the same few intervals over and over.
+    """
+    f = np.eye(4)
+    f[0, 2] = f[1, 3] = dt_s
+    axis = q * np.array([[dt_s**3 / 3.0, dt_s**2 / 2.0], [dt_s**2 / 2.0, dt_s]])
+    out = np.zeros((4, 4))
+    for k in (0, 1):  # x with vx, y with vy
+        out[k, k] = axis[0, 0]
+        out[k, k + 2] = axis[0, 1]
+        out[k + 2, k] = axis[1, 0]
+        out[k + 2, k + 2] = axis[1, 1]
+    f.setflags(write=False)
+    out.setflags(write=False)
+    return f, out
 
 
 def sample_candidates(cands: Candidates, n: int, rng: np.random.Generator) -> np.ndarray:

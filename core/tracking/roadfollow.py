@@ -71,5 +71,6 @@ def follow_road(
     pts = shapely.get_coordinates(shapely.line_interpolate_point(line, np.clip(s, 0, line.length)))
     # Past either end of the line, carry on in a straight line.
     over = np.maximum(np.where(s > line.length, s - line.length, 0), np.where(s < 0, -s, 0))
-    pts = pts + offset + over[:, None] * (sign * tangent / max(np.linalg.norm(tangent), 1e-9))
+    step = sign * tangent / max(float(np.linalg.norm(tangent)), 1e-9)
+    pts = pts + offset + over[:, None] * step
     return pts

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import shapely
@@ -156,6 +157,11 @@ class RoadGraph:
         raise TrackingError("road particles crossed too many junctions in one step")
 
 
+# Default of the optional ``RoadParticles`` arrays: omitted at construction,
+# ``__post_init__`` replaces it, so on built particles the attribute is always an ndarray.
+_FILLED_BY_POST_INIT = cast("np.ndarray", None)
+
+
 @dataclass(frozen=True, eq=False)
 class RoadParticles:
     """Particles on (or off) a road network.
@@ -171,8 +177,8 @@ class RoadParticles:
     v: np.ndarray
     lateral: np.ndarray
     xy: np.ndarray
-    free: np.ndarray | None = None
-    vxy: np.ndarray | None = None
+    free: np.ndarray = _FILLED_BY_POST_INIT
+    vxy: np.ndarray = _FILLED_BY_POST_INIT
 
     def __post_init__(self) -> None:
         n = self.s.shape[0]
@@ -246,14 +252,13 @@ class RoadParticleMotion:
         s: np.ndarray,
         v: np.ndarray,
         lateral: np.ndarray,
-        free: np.ndarray | None = None,
-        vxy: np.ndarray | None = None,
-        free_xy: np.ndarray | None = None,
+        free: np.ndarray,
+        vxy: np.ndarray,
+        free_xy: np.ndarray,
     ) -> RoadParticles:
         centre, normal = self.network.frame(edge, s)
         xy = centre + lateral[:, None] * normal
-        if free is not None and free_xy is not None:
-            xy[free] = free_xy[free]
+        xy[free] = free_xy[free]
         return RoadParticles(edge, s, v, lateral, xy, free, vxy)
 
     def initial(self, cands: Candidates, n: int, rng: np.random.Generator) -> RoadParticles:

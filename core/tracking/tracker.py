@@ -31,6 +31,7 @@ import numpy as np
 from ..errors import TrackingError
 from .config import TrackerConfig
 from .fusion import fuse_measurements
+from .hypothesiser import CandidateBlock
 from .initiation import spread_m
 from .protocols import (
     Candidates,
@@ -117,6 +118,13 @@ class _Record:
     cands: list[Candidates] = field(default_factory=list)
     #: While tentative: the state's position spread (m) after each update, oldest first.
     spreads: list[float] = field(default_factory=list)
+    #: The last :class:`Track` value made of this record (reused while its points are
+    #: the same objects: points are immutable, any change replaces them).
+    exported: Track | None = None
+
+
+#: Below this many (track, candidate) pairs a scan gates track by track (less overhead).
+_BATCH_MIN_PAIRS = 12
 
 
 def _best(hyps: Sequence[SingleHypothesis | None]) -> SingleHypothesis | None:
@@ -153,8 +161,8 @@ class Tracker:
     The newest point of a track is the filtered estimate; the ``config.smoothing_lag``
     points before it may still be revised by later fixes (fixed-lag smoothing), so a
     live display should redraw a track's tail rather than only append to it. Ended
-    tracks are kept (for :meth:`tracks`); a long-running server should export and drop
-    them itself if memory matters.
+    tracks are kept (for :meth:`tracks`); a long-running caller exports them and drops
+    the old ones with :meth:`drop_ended`.
     """
 
     def __init__(self, components: TrackerComponents, config: TrackerConfig) -> None:
@@ -227,18 +235,58 @@ class Tracker:
     # ----------------------------------------------------------------- reading
     def _to_track(self, rec: _Record) -> Track:
         points = tuple(rec.points)
-        sensors = frozenset(s for p in points for s in p.sensors)
-        gaps = find_gaps(np.array([p.t_s for p in points]), self.config.gap_threshold_s)
+        old = rec.exported
+        # tuple equality compares TrackPoints by identity (eq=False): same objects, same track
+        if old is not None and old.id == rec.track_id and old.points == points:
+            return old
+        sensors = frozenset().union(*(p.sensors for p in points))
+        t_s = np.fromiter((p.t_s for p in points), dtype=np.float64, count=len(points))
+        gaps = find_gaps(t_s, self.config.gap_threshold_s)
         if rec.track_id is None:
             raise TrackingError("internal: a tentative track cannot be exported")
-        return Track(rec.track_id, rec.cls, points, sensors, tuple(gaps))  # type: ignore[arg-type]
+        track = Track(rec.track_id, rec.cls, points, sensors, tuple(gaps))  # type: ignore[arg-type]
+        rec.exported = track
+        return track
 
-    def tracks(self, *, include_ended: bool = True) -> list[Track]:
-        """Return the confirmed tracks as values, by id (buffered fixes not yet included)."""
+    def tracks(
+        self, *, include_ended: bool = True, ended_after_s: float | None = None
+    ) -> list[Track]:
+        """Return the confirmed tracks as values, by id (buffered fixes not yet included).
+
+        ``ended_after_s``: of the ended tracks, only those whose newest point is at or
+        after this time (s). A long live session ends thousands of tracks; asking for the
+        recent ones costs what they hold, not what every track ever held.
+        """
         recs = [r for r in self._live if r.track_id is not None]
-        if include_ended:
+        if include_ended and ended_after_s is None:
             recs += self._ended
+        elif include_ended and ended_after_s is not None:
+            recs += [r for r in self._ended if r.points and r.points[-1].t_s >= ended_after_s]
         return [self._to_track(r) for r in sorted(recs, key=lambda r: r.track_id or 0)]
+
+    @property
+    def n_held(self) -> tuple[int, int]:
+        """Track records held in memory: ``(live, ended)`` (live includes tentative)."""
+        return len(self._live), len(self._ended)
+
+    def drop_ended(self, before_t_s: float) -> list[int]:
+        """Forget ended tracks whose last fix is older than ``before_t_s`` (s).
+
+        Tracks still inside the re-acquisition window (``config.reacquire_s`` before the
+        newest processed fix) are kept whatever ``before_t_s`` says, so dropping never
+        changes the tracks made afterwards; it only bounds memory. Returns the dropped
+        ids; :meth:`tracks` no longer lists them.
+        """
+        horizon = min(float(before_t_s), self._t_done - self.config.reacquire_s)
+        keep: list[_Record] = []
+        dropped: list[int] = []
+        for rec in self._ended:
+            if rec.t_update < horizon and rec.track_id is not None:
+                dropped.append(rec.track_id)
+            else:
+                keep.append(rec)
+        self._ended = keep
+        return dropped
 
     def predicted_positions(self, t_s: float) -> dict[int, np.ndarray]:
         """Live confirmed tracks' horizontal means predicted to ``t_s``: id -> (2,)."""
@@ -274,7 +322,10 @@ class Tracker:
         return out
 
     def _hypothesise(
-        self, rec: _Record, items: Sequence[tuple[Measurement, Candidates]], allowed: Sequence[bool]
+        self,
+        rec: _Record,
+        items: Sequence[tuple[Measurement, Candidates]],
+        allowed: Sequence[bool],
     ) -> list[SingleHypothesis | None]:
         flt = self.components.per_class[rec.cls].filter
         mean, cov = flt.gaussian(rec.state)
@@ -286,6 +337,33 @@ class Tracker:
                 row.append(self.components.hypothesiser.hypothesise(mean, cov, cands, j))
         return row
 
+    def _hypothesise_all(
+        self,
+        recs: Sequence[_Record],
+        items: Sequence[tuple[Measurement, Candidates]],
+        allowed: Sequence[bool],
+        block: list[tuple[CandidateBlock, np.ndarray]],
+    ) -> list[list[SingleHypothesis | None]]:
+        """:meth:`_hypothesise` for each of ``recs``.
+
+        Batched when the hypothesiser can and the scan is big enough to gain by it;
+        ``block`` caches the scan's stacked candidates (filled on first use).
+        """
+        batched = getattr(self.components.hypothesiser, "hypothesise_tracks", None)
+        n_cands = sum(c.size for _, c in items)
+        if batched is None or len(recs) * n_cands <= _BATCH_MIN_PAIRS:
+            return [self._hypothesise(r, items, allowed) for r in recs]
+        if not block:
+            classes = np.array([m.cls for m, _ in items])
+            block.append((CandidateBlock.stack([c for _, c in items]), classes))
+        stacked, classes = block[0]
+        gauss = [self.components.per_class[r.cls].filter.gaussian(r.state) for r in recs]
+        means = np.array([g[0] for g in gauss])
+        covs = np.array([g[1] for g in gauss])
+        cls = np.array([r.cls for r in recs])
+        mask = np.asarray(allowed, dtype=bool)[None, :] & (classes[None, :] == cls[:, None])
+        return batched(means, covs, stacked, mask)
+
     def _apply(
         self, rec: _Record, t: float, m: Measurement, cands: Candidates, hyp: SingleHypothesis
     ) -> None:
@@ -295,7 +373,7 @@ class Tracker:
         rec.nis_sum += hyp.distance2
         rec.t_update = t
         p, cov = flt.estimate(rec.state)
-        rec.points.append(TrackPoint(t, p, m.sensors, m.indices, cov))
+        rec.points.append(TrackPoint._made(t, p, m.sensors, m.indices, cov))
         rec.cands.append(cands)
         if rec.track_id is None:
             rec.spreads.append(spread_m(flt.gaussian(rec.state)[1]))
@@ -306,6 +384,8 @@ class Tracker:
 
     def _scan(self, t: float, meas: list[Measurement]) -> None:
         items = self._candidates(meas)
+        # every track is gated against every measurement: candidates stacked once
+        block: list[tuple[CandidateBlock, np.ndarray]] = []
         # End what coasted too long before it can take a fix: identity is not kept
         # across an absence longer than the limit, however wide the gate has grown.
         self._confirm_and_delete(t)
@@ -317,7 +397,7 @@ class Tracker:
         confirmed = [r for r in self._live if r.track_id is not None]
         if confirmed and items:
             allowed = [True] * len(items)
-            rows = [self._hypothesise(r, items, allowed) for r in confirmed]
+            rows = self._hypothesise_all(confirmed, items, allowed, block)
             for rec, hyp in zip(
                 confirmed, self.components.associator.associate(rows, len(items)), strict=True
             ):
@@ -336,7 +416,9 @@ class Tracker:
                 groups.setdefault(rec.group, []).append(rec)
         if groups and any(free):
             keys = sorted(groups)
-            sib_rows = {g: [self._hypothesise(r, items, free) for r in groups[g]] for g in keys}
+            tentative = [r for g in keys for r in groups[g]]
+            flat = iter(self._hypothesise_all(tentative, items, free, block))
+            sib_rows = {g: [next(flat) for _ in groups[g]] for g in keys}
             group_rows = [
                 [_best([row[j] for row in sib_rows[g]]) for j in range(len(items))] for g in keys
             ]
@@ -366,7 +448,7 @@ class Tracker:
             rec = _Record(self._next_uid, group, m.cls, state, t, t)
             self._next_uid += 1
             p, cov = parts.filter.estimate(state)
-            rec.points.append(TrackPoint(t, p, m.sensors, m.indices, cov))
+            rec.points.append(TrackPoint._made(t, p, m.sensors, m.indices, cov))
             rec.cands.append(cands)
             rec.spreads.append(spread_m(parts.filter.gaussian(state)[1]))
             rec.n_updates = 1
@@ -382,9 +464,9 @@ class Tracker:
         first = len(rec.points) - len(revised)
         offset = len(rec.cands) - len(rec.points)
         for k, xy in enumerate(revised, start=first):
-            old, cands = rec.points[k], rec.cands[k + offset]
-            near = int(np.argmin(np.sum((cands.z_enu[:, :2] - xy) ** 2, axis=1)))
-            p = np.array([xy[0], xy[1], cands.z_enu[near, 2]], dtype=np.float64)
+            old, z = rec.points[k], rec.cands[k + offset].z_enu
+            near = 0 if len(z) == 1 else int(np.argmin(np.sum((z[:, :2] - xy) ** 2, axis=1)))
+            p = np.array([xy[0], xy[1], z[near, 2]], dtype=np.float64)
             rec.points[k] = old._moved(p)
 
     def _confirm(self, rec: _Record, t: float) -> None:

@@ -284,6 +284,43 @@ class TrackPoint:
         object.__setattr__(self, "sensors", tuple(self.sensors))
         object.__setattr__(self, "fix_indices", tuple(int(i) for i in self.fix_indices))
 
+    @classmethod
+    def _made(
+        cls,
+        t_s: float,
+        p_enu: np.ndarray,
+        sensors: tuple[str, ...],
+        fix_indices: tuple[int, ...],
+        cov_xy: np.ndarray | None,
+    ) -> TrackPoint:
+        """Internal: a point from a filter's fresh estimate, checked the cheap way.
+
+        ``p_enu`` (3,) and ``cov_xy`` (2, 2) float64 arrays (copied, as the constructor
+        does); ``sensors`` and ``fix_indices`` tuples of str and int (a tracker's
+        :class:`~.protocols.Measurement` fields). Anything else, or a non-finite value,
+        goes through the public constructor, which says what is wrong.
+        """
+        if (
+            p_enu.shape != (3,)
+            or p_enu.dtype != np.float64
+            or (cov_xy is not None and (cov_xy.shape != (2, 2) or cov_xy.dtype != np.float64))
+            or not np.isfinite(p_enu).all()
+            or (cov_xy is not None and not np.isfinite(cov_xy).all())
+        ):
+            return cls(t_s, p_enu, sensors, fix_indices, cov_xy)
+        p_enu = p_enu.copy()
+        p_enu.setflags(write=False)
+        if cov_xy is not None:
+            cov_xy = cov_xy.copy()
+            cov_xy.setflags(write=False)
+        point = object.__new__(cls)
+        object.__setattr__(point, "t_s", float(t_s))
+        object.__setattr__(point, "p_enu", p_enu)
+        object.__setattr__(point, "sensors", tuple(sensors))
+        object.__setattr__(point, "fix_indices", tuple(int(i) for i in fix_indices))
+        object.__setattr__(point, "cov_xy", cov_xy)
+        return point
+
     def _moved(self, p_enu: np.ndarray) -> TrackPoint:
         """Internal: this point at another position ``p_enu`` (3,), float64 (m).
 

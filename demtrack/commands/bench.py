@@ -1,4 +1,4 @@
-"""``demtrack bench raycast|viewshed|server``: benchmarks (Open3D/Embree, GDAL, the server)."""
+"""``demtrack bench raycast|viewshed|server|console-soak``: benchmarks (peers, server, console)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,12 @@ __all__ = ["register"]
 def _run(args: argparse.Namespace) -> int:
     from demtrack.bench import raycast, server_bench, viewshed
 
-    job = {"raycast": raycast.main, "viewshed": viewshed.main, "server": server_bench.main}[
-        args.bench
-    ]
+    jobs = {"raycast": raycast.main, "viewshed": viewshed.main, "server": server_bench.main}
+    if args.bench == "console-soak":  # Playwright is imported only for this one
+        from demtrack.bench import console_soak
+
+        jobs["console-soak"] = console_soak.main
+    job = jobs[args.bench]
     return int(job(list(args.extra)) or 0)
 
 
@@ -30,3 +33,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "server", help="console ingest rate and WebSocket fan-out latency", add_help=False
     )
     s.set_defaults(func=_run)
+    c = bsub.add_parser(
+        "console-soak",
+        help="the console in Chromium over a long replay at 10x with about 20 tracks",
+        add_help=False,
+    )
+    c.set_defaults(func=_run)

@@ -202,8 +202,8 @@ async def sensor_viewshed(
             doc["frame"] = "site ENU (m)"
         return doc
 
-    key = ("geojson", sensor.id, sensor.pan_deg, sensor.tilt_deg, mode, target_height_m)
-    key += (max_range_m, frame)
+    key: tuple[Any, ...] = ("geojson", sensor.id, sensor.pan_deg, sensor.tilt_deg, mode)
+    key += (target_height_m, max_range_m, frame)
     return await run_in_threadpool(_lru(state).get, key, make)
 
 

@@ -87,3 +87,45 @@ def test_elevation_rejects_bad_points(client, e, n):
 
 def test_elevation_needs_the_token_like_every_read(client):
     assert client.get("/api/site/elevation", params={"e": 0, "n": 0}).status_code == 401
+
+
+def test_detections_of_a_time_window_are_those_stored_then(client):
+    """The camera panels' boxes of a past moment: the window query against the id listing."""
+    rng = np.random.default_rng(0)
+    recs = []
+    for sensor, t0 in (("cam1", 0.0), ("cam3", 0.05), ("cam2", 0.1)):
+        for k in range(40):
+            u, v = rng.uniform(100, 1000), rng.uniform(100, 600)
+            recs.append({"t": round(t0 + 0.25 * k, 3), "sensor": sensor, "class": "human",
+                         "bbox": [u - 8, v - 30, u + 8, v]})  # fmt: skip
+    resp = client.post("/api/detections", json={"detections": recs}, headers=AUTH)
+    assert resp.status_code == 200 and resp.json()["skipped"] == 0
+    listed = client.get("/api/detections", params={"limit": 10_000}, headers=AUTH).json()
+    mine = [d for d in listed if d["t"] <= 10.0 and d["class"] == "human"]
+    for t_from, t_to, sensors in [(2.0, 2.6, None), (2.05, 2.05, None), (0.0, 9.9, ["cam3"]),
+                                  (-5.0, 0.0, ["cam1", "cam2"]), (3.01, 3.04, None)]:  # fmt: skip
+        params: dict = {"t_from": t_from, "t_to": t_to}
+        if sensors:
+            params["sensor"] = sensors
+        got = client.get("/api/detections", params=params, headers=AUTH).json()
+        want = [
+            d
+            for d in mine
+            if t_from <= d["t"] <= t_to and (sensors is None or d["sensor"] in sensors)
+        ]
+        assert got == sorted(want, key=lambda d: (d["t"], d["id"])), (t_from, t_to, sensors)
+    # Paging inside a window, and one-sided windows.
+    page = client.get("/api/detections", params={"t_from": 1.0, "limit": 3}, headers=AUTH).json()
+    assert [d["t"] for d in page] == sorted(d["t"] for d in mine if d["t"] >= 1.0)[:3]
+    early = client.get("/api/detections", params={"t_to": 0.05}, headers=AUTH).json()
+    assert {(d["sensor"], d["t"]) for d in early} >= {("cam1", 0.0), ("cam3", 0.05)}
+    assert all(d["t"] <= 0.05 for d in early)
+
+
+@pytest.mark.parametrize(
+    "params, code",
+    [({"t_from": 3, "t_to": 2}, 422), ({"t_from": "nan"}, 422), ({"sensor": "nope"}, 404)],
+)
+def test_detections_window_rejects_bad_queries(client, params, code):
+    resp = client.get("/api/detections", params=params, headers=AUTH)
+    assert resp.status_code == code and resp.json()["detail"]
