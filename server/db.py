@@ -402,6 +402,29 @@ class Store:
             (r[0], Detection(r[1], r[2], (r[3], r[4], r[5], r[6]), r[7], r[8], r[9])) for r in rows
         ]
 
+    def detections_in_window(
+        self,
+        sensors: Sequence[str],
+        t_from: float,
+        t_to: float,
+        after_id: int = 0,
+        limit: int = 1000,
+    ) -> list[tuple[int, Detection]]:
+        """Detections of ``sensors`` with ``t_from <= t_s <= t_to``, by time then id.
+
+        ``sensor IN (...) AND t_s`` range is answered from the ``(sensor, t_s)`` index.
+        """
+        marks = ",".join("?" * len(sensors))
+        rows = self._rows(
+            "SELECT id, t_s, sensor, u_min, v_min, u_max, v_max, cls, score, local_id"
+            f" FROM detections WHERE sensor IN ({marks}) AND t_s >= ? AND t_s <= ? AND id > ?"
+            " ORDER BY t_s, id LIMIT ?",  # noqa: S608  (placeholders only)
+            (*sensors, t_from, t_to, after_id, limit),
+        )
+        return [
+            (r[0], Detection(r[1], r[2], (r[3], r[4], r[5], r[6]), r[7], r[8], r[9])) for r in rows
+        ]
+
     def fixes(self, after_id: int = 0, limit: int = 1000) -> list[dict[str, Any]]:
         """Stored fix bodies with ``detection_id > after_id``, in detection order."""
         rows = self._rows(

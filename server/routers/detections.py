@@ -97,17 +97,7 @@ def _in_window(
     after_id: int,
     limit: int,
 ) -> list[tuple[int, Detection]]:
-    """Detections of ``sensors`` in ``[t_from, t_to]`` by time, then id.
-
-    ``sensor IN (...) AND t_s BETWEEN`` is answered from the ``(sensor, t_s)`` index.
-    """
+    """Detections of ``sensors`` in ``[t_from, t_to]`` (open ends: unbounded), by time, then id."""
     lo = -math.inf if t_from is None else t_from
     hi = math.inf if t_to is None else t_to
-    marks = ",".join("?" * len(sensors))
-    rows = state.store._rows(  # the store's read connection and lock
-        "SELECT id, t_s, sensor, u_min, v_min, u_max, v_max, cls, score, local_id"
-        f" FROM detections WHERE sensor IN ({marks}) AND t_s >= ? AND t_s <= ? AND id > ?"
-        " ORDER BY t_s, id LIMIT ?",  # noqa: S608  (placeholders only)
-        (*sensors, lo, hi, after_id, limit),
-    )
-    return [(r[0], Detection(r[1], r[2], (r[3], r[4], r[5], r[6]), r[7], r[8], r[9])) for r in rows]
+    return state.store.detections_in_window(sensors, lo, hi, after_id, limit)
