@@ -51,7 +51,7 @@ from demtrack.core.tracking import build_tracker
 from demtrack.core.tracking.types import CLASSES, Detection, Fix, Track
 from demtrack.core.zone_io import read_zones_geojson
 
-from .db import Store
+from .db import Store, dumps_json
 from .live_events import LiveEventParams, LiveEvents
 
 __all__ = ["Pipeline", "fix_from_body", "pipeline_options"]
@@ -283,7 +283,9 @@ class Pipeline:
         self._n_det: dict[str, int] = {}
         self._seen: dict[int, tuple[int, bytes, bool]] = {}
         self._live_ids: set[int] = set()
-        self._points: dict[int, tuple[np.ndarray, list[dict[str, Any]]]] = {}
+        # Per track: positions as last sent, their JSON point dicts and those dicts encoded
+        # (a changed track's stored body is re-assembled from the encoded points).
+        self._points: dict[int, tuple[np.ndarray, list[dict[str, Any]], list[str]]] = {}
         self._heap: list[tuple[float, str, int, dict[str, Any]]] = []
         #: Tracker fixes of the queued bodies made in this run (detection id -> fix):
         #: what :func:`fix_from_body` would make of the body, without the round trip.
@@ -534,7 +536,9 @@ class Pipeline:
         A track only gains points, so its final form ends at or after that time: reading
         the ended tracks from there on avoids rebuilding every track the session ever had.
         """
-        ends = [self._points[i][1][-1]["t_s"] for i in ids if self._points.get(i, (0, []))[1]]
+        ends = [
+            self._points[i][1][-1]["t_s"] for i in ids if i in self._points and self._points[i][1]
+        ]
         return min(ends) if len(ends) == len(ids) else -math.inf
 
     def _fix_bodies(
@@ -594,14 +598,14 @@ class Pipeline:
         cached = self._points.get(track.id)
         same = 0
         if cached is not None:
-            old_p, old_pts = cached
+            old_p, old_pts, old_js = cached
             m = min(len(old_p), len(p))
             diff = np.flatnonzero(np.any(old_p[:m] != p[:m], axis=1))
             same = int(diff[0]) if len(diff) else m
             same = min(same, len(old_pts))
-            pts = old_pts[:same]
+            pts, js = old_pts[:same], old_js[:same]
         else:
-            pts = []
+            pts, js = [], []
         new = track.points[same:]
         if new:
             q = p[same:]
@@ -620,8 +624,19 @@ class Pipeline:
                         "detection_ids": list(tp.fix_indices),
                     }
                 )
-        self._points[track.id] = (p, pts)
+                js.append(dumps_json(pts[-1]))
+        self._points[track.id] = (p, pts, js)
         return pts
+
+    def _body_json(self, body: dict[str, Any]) -> str:
+        """``body`` (a whole :meth:`track_body`) as JSON, from its points' cached encodings.
+
+        The same text as encoding ``body`` at once (``points`` is its last key), without
+        re-encoding a long track's unchanged points on every batch.
+        """
+        head = dumps_json({k: v for k, v in body.items() if k != "points"})
+        js = self._points[body["id"]][2]
+        return f'{head[:-1]},"points":[{",".join(js)}]}}'
 
     def track_body(self, track: Track, live: bool, first_index: int = 0) -> dict[str, Any]:
         """JSON body of a track, points from ``first_index`` on."""
@@ -672,7 +687,7 @@ class Pipeline:
                     "n_max": float(p[:, 1].max()),
                     "sensors": sorted(track.sensors),
                     "live": live,
-                    "body": full,
+                    "body": self._body_json(full),
                 }
             )
             if not live:

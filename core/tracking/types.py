@@ -12,6 +12,7 @@ the box's foot pixel and every place it meets the terrain); the trackers turn fi
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -371,17 +372,21 @@ class Track:
         object.__setattr__(self, "sensors", frozenset(self.sensors))
         object.__setattr__(self, "gaps", tuple((float(a), float(b)) for a, b in self.gaps))
 
-    @property
+    # A Track is an immutable value, read many times per batch by the live server (a long
+    # track's arrays cost O(points) to stack): built once, cached, read-only.
+    @functools.cached_property
     def t_s(self) -> np.ndarray:
-        """Point times, shape (n,) (s)."""
-        return np.array([p.t_s for p in self.points], dtype=np.float64)
+        """Point times, shape (n,) (s); read-only."""
+        t = np.array([p.t_s for p in self.points], dtype=np.float64)
+        t.setflags(write=False)
+        return t
 
-    @property
+    @functools.cached_property
     def p_enu(self) -> np.ndarray:
-        """Point positions, shape (n, 3), local frame (m)."""
-        if not self.points:
-            return np.zeros((0, 3))
-        return np.stack([p.p_enu for p in self.points])
+        """Point positions, shape (n, 3), local frame (m); read-only."""
+        p = np.stack([p.p_enu for p in self.points]) if self.points else np.zeros((0, 3))
+        p.setflags(write=False)
+        return p
 
 
 @dataclass(frozen=True, eq=False)

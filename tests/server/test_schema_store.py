@@ -71,3 +71,29 @@ def test_openapi_documents_every_route(ro_client):
         "/api/health",
     ):
         assert path in spec["paths"], path
+
+
+def test_derived_rows_commit_without_a_sync_and_batches_with_one(tmp_path):
+    from demtrack.core.tracking.types import Detection
+
+    store = db.Store(tmp_path / "s.sqlite3")
+    levels: list[int] = []
+    real_tx = store._tx
+
+    def spy(fn, **kw):
+        def inner(c):
+            levels.append(c.execute("PRAGMA synchronous").fetchone()[0])
+            return fn(c)
+
+        return real_tx(inner, **kw)
+
+    store._tx = spy  # type: ignore[method-assign]
+    det = Detection(0.0, "cam1", (10.0, 10.0, 20.0, 40.0), "human")
+    store.insert_batch([det], {"n_records": 1, "accepted": 1}, None)
+    store.write_derived([], [], [("event", {"type": "event", "kind": "x", "t_s": 0.0})])
+    store.insert_batch([det], {"n_records": 1, "accepted": 1}, None)
+    # FULL (2) for the durable batches, NORMAL (1) for derived rows, and FULL again after.
+    assert levels == [2, 1, 2]
+    assert store._w.execute("PRAGMA synchronous").fetchone()[0] == 2
+    assert store.counts()["events"] == 1
+    store.close()
