@@ -146,6 +146,60 @@ def _runs(flag: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True))
 
 
+def _range_tables(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sparse tables of range maxima and minima of ``xy`` (n, 2).
+
+    ``top[k, i]`` / ``bot[k, i]`` = max / min of ``xy[i : i + 2**k]`` (padded with -inf /
+    inf past the end), shape (levels, n, 2).
+    """
+    n = len(xy)
+    levels = max(1, int(n).bit_length())
+    top = np.full((levels, n, 2), -np.inf)
+    bot = np.full((levels, n, 2), np.inf)
+    top[0], bot[0] = xy, xy
+    for k in range(1, levels):
+        h = 1 << (k - 1)
+        top[k, : n - h] = np.maximum(top[k - 1, : n - h], top[k - 1, h:])
+        bot[k, : n - h] = np.minimum(bot[k - 1, : n - h], bot[k - 1, h:])
+    return top, bot
+
+
+def _range_box(
+    tables: tuple[np.ndarray, np.ndarray], i: np.ndarray, j: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Bounding boxes of ``xy[i..j]`` (``i <= j``, inclusive): ``lo``, ``hi`` (m, 2).
+
+    Exact: the two power-of-two spans that cover the range only enter a max or a min.
+    """
+    top, bot = tables
+    k = np.frexp((j - i + 1).astype(float))[1] - 1  # floor(log2(span))
+    j0 = j - (1 << k) + 1
+    return np.minimum(bot[k, i], bot[k, j0]), np.maximum(top[k, i], top[k, j0])
+
+
+def _last_inside(xy: np.ndarray, radius_m: float) -> np.ndarray:
+    """For each point ``i`` the last ``j`` such that ``xy[i..j]`` fits the disc test.
+
+    ``xy`` (n, 2), m. A window fits when half its bounding box's diagonal is at most
+    ``radius_m``; growing a window never makes it fit, so ``j`` is found by bisection
+    for all ``i`` at once, each window's box read from :func:`_range_tables`.
+    """
+    n = len(xy)
+    tables = _range_tables(xy)
+    lo = np.arange(n)
+    hi = np.full(n, n - 1)
+    while True:
+        todo = np.flatnonzero(lo < hi)
+        if not len(todo):
+            return lo
+        j = (lo[todo] + hi[todo] + 1) // 2
+        box_lo, box_hi = _range_box(tables, todo, j)
+        ext = box_hi - box_lo
+        fits = np.hypot(ext[:, 0], ext[:, 1]) / 2 <= radius_m
+        lo[todo] = np.where(fits, j, lo[todo])
+        hi[todo] = np.where(fits, hi[todo], j - 1)
+
+
 def detect_loitering(
     trajectories: Sequence[Trajectory], params: LoiterParams | None = None
 ) -> list[ActivityEvent]:
@@ -154,22 +208,13 @@ def detect_loitering(
     out = []
     for tid, tr in zip(_ids(trajectories), trajectories, strict=True):
         t, p = np.asarray(tr.t_s, float), np.asarray(tr.p_enu, float)
-        n, j = len(t), 0
-        best_end = np.full(n, -1)
-        # Two pointers: the window [i, j] is "inside a disc" when half its bounding-box
-        # diagonal is at most the radius; shrinking a window keeps that true.
-        for i in range(n):
-            j = max(j, i)
-            while j + 1 < n:
-                w = p[i : j + 2, :2]
-                if np.hypot(*(w.max(axis=0) - w.min(axis=0))) / 2 > params.radius_m:
-                    break
-                j += 1
-            best_end[i] = j
+        n = len(t)
+        if n == 0:
+            continue
+        best_end = _last_inside(p[:, :2], params.radius_m)
         qualifies = t[best_end] - t >= params.min_duration_s
-        covered = np.zeros(n, bool)
-        for i in np.flatnonzero(qualifies).tolist():
-            covered[i : best_end[i] + 1] = True
+        # a point is covered when some qualifying window starting at or before it reaches it
+        covered = np.maximum.accumulate(np.where(qualifies, best_end, -1)) >= np.arange(n)
         for a, b in _runs(covered):
             w = p[a:b]
             radius = float(np.hypot(*(w[:, :2].max(axis=0) - w[:, :2].min(axis=0))) / 2)
@@ -191,6 +236,21 @@ def _resample(tr: Trajectory, grid: np.ndarray) -> np.ndarray:
     return np.column_stack([np.interp(grid, t, p[:, k]) for k in range(3)])
 
 
+def _step_s(t: np.ndarray) -> float:
+    """Typical time step of ``t`` (n,) (s), never 0.
+
+    The median step, or when that is 0 the median of the positive steps (1 s when there
+    is none). A fused track holds one point per camera's fix, so several points can share a time;
+    when most do, the median step is 0 and speeds over it would be 0/0.
+    """
+    steps = np.diff(t)
+    med = float(np.median(steps)) if len(steps) else 0.0
+    if med > 0:
+        return med
+    steps = steps[steps > 0]
+    return float(np.median(steps)) if len(steps) else 1.0
+
+
 def _speed(p: np.ndarray, dt: float) -> np.ndarray:
     if len(p) < 2:
         return np.zeros(len(p))
@@ -198,69 +258,152 @@ def _speed(p: np.ndarray, dt: float) -> np.ndarray:
     return np.hypot(v[:, 0], v[:, 1])
 
 
+#: Slack on the exact tests' thresholds in the cheap prefilters (m, s): a pair or a point
+#: is skipped only when it misses a necessary condition by more than rounding could explain.
+_EPS = 1e-6
+
+
+def _extents(trajectories: Sequence[Trajectory]) -> tuple[np.ndarray, ...]:
+    """Per trajectory: point count, first and last time, horizontal bounding box.
+
+    Returns ``n`` (m,), ``t0``, ``t1`` (m,) in s, ``lo``, ``hi`` (m, 2) in m (NaN when empty).
+    """
+    m = len(trajectories)
+    n = np.zeros(m, int)
+    t0, t1 = np.full(m, np.nan), np.full(m, np.nan)
+    lo, hi = np.full((m, 2), np.nan), np.full((m, 2), np.nan)
+    for k, tr in enumerate(trajectories):
+        t, p = np.asarray(tr.t_s, float), np.asarray(tr.p_enu, float)
+        n[k] = len(t)
+        if len(t):
+            t0[k], t1[k] = t[0], t[-1]
+            lo[k], hi[k] = p[:, :2].min(axis=0), p[:, :2].max(axis=0)
+    return n, t0, t1, lo, hi
+
+
+def _box_gaps(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Horizontal distance between every two bounding boxes, shape (m, m) (m)."""
+    gap = np.maximum(lo[:, None, :] - hi[None, :, :], lo[None, :, :] - hi[:, None, :])
+    return np.hypot(*np.maximum(gap, 0.0).transpose(2, 0, 1))
+
+
 def detect_rendezvous(
     trajectories: Sequence[Trajectory], params: RendezvousParams | None = None
 ) -> list[ActivityEvent]:
-    """Pairs of targets stopped together for at least ``min_duration_s``."""
+    """Pairs of targets stopped together for at least ``min_duration_s``.
+
+    Pairs that cannot qualify are skipped before the test on the common time grid: those
+    that share less than ``min_duration_s`` or whose bounding boxes lie more than
+    ``distance_m`` apart (positions on the grid lie inside each path's box). The events
+    are exactly those of the all-pairs
+    :func:`~demtrack.core.activity_reference.detect_rendezvous_reference`.
+    """
     params = params or RendezvousParams()
     ids = _ids(trajectories)
+    n, t0, t1, lo, hi = _extents(trajectories)
+    valid = n >= 2
+    with np.errstate(invalid="ignore"):
+        shared = np.minimum(t1[:, None], t1[None, :]) - np.maximum(t0[:, None], t0[None, :])
+        near = _box_gaps(lo, hi) <= params.distance_m + _EPS
+    cand = np.triu(valid[:, None] & valid[None, :] & near & (shared >= params.min_duration_s), 1)
     out = []
-    for a in range(len(trajectories)):
-        for b in range(a + 1, len(trajectories)):
-            ta, tb = trajectories[a].t_s, trajectories[b].t_s
-            if len(ta) < 2 or len(tb) < 2:
-                continue
-            lo, hi = max(ta[0], tb[0]), min(ta[-1], tb[-1])
-            if hi - lo < params.min_duration_s:
-                continue
-            grid = np.arange(lo, hi + 1e-9, params.dt_s)
-            pa, pb = _resample(trajectories[a], grid), _resample(trajectories[b], grid)
-            close = np.hypot(*(pa[:, :2] - pb[:, :2]).T) <= params.distance_m
-            still = (_speed(pa, params.dt_s) < params.stop_speed_mps) & (
-                _speed(pb, params.dt_s) < params.stop_speed_mps
-            )
-            for s, e in _runs(close & still):
-                if grid[e - 1] - grid[s] >= params.min_duration_s:
-                    mid = (pa[s:e] + pb[s:e]).mean(axis=0) / 2
-                    gap = float(np.hypot(*(pa[s:e, :2] - pb[s:e, :2]).T).mean())
-                    out.append(
-                        ActivityEvent(
-                            "rendezvous",
-                            float(grid[s]),
-                            float(grid[e - 1]),
-                            (ids[a], ids[b]),
-                            mid,
-                            {"mean_distance_m": gap, "duration_s": float(grid[e - 1] - grid[s])},
-                        )
+    for a, b in zip(*np.nonzero(cand), strict=True):
+        ta, tb = trajectories[a].t_s, trajectories[b].t_s
+        lo_t, hi_t = max(ta[0], tb[0]), min(ta[-1], tb[-1])
+        if hi_t - lo_t < params.min_duration_s:
+            continue
+        grid = np.arange(lo_t, hi_t + 1e-9, params.dt_s)
+        pa, pb = _resample(trajectories[a], grid), _resample(trajectories[b], grid)
+        close = np.hypot(*(pa[:, :2] - pb[:, :2]).T) <= params.distance_m
+        if not close.any():
+            continue
+        still = (_speed(pa, params.dt_s) < params.stop_speed_mps) & (
+            _speed(pb, params.dt_s) < params.stop_speed_mps
+        )
+        for s, e in _runs(close & still):
+            if grid[e - 1] - grid[s] >= params.min_duration_s:
+                mid = (pa[s:e] + pb[s:e]).mean(axis=0) / 2
+                gap = float(np.hypot(*(pa[s:e, :2] - pb[s:e, :2]).T).mean())
+                out.append(
+                    ActivityEvent(
+                        "rendezvous",
+                        float(grid[s]),
+                        float(grid[e - 1]),
+                        (ids[int(a)], ids[int(b)]),
+                        mid,
+                        {"mean_distance_m": gap, "duration_s": float(grid[e - 1] - grid[s])},
                     )
+                )
     return out
 
 
+@dataclass(eq=False)
+class _Drive:
+    """One trajectory's figures for the convoy test, computed once per call.
+
+    ``s_m`` (n,) is the cumulative horizontal path length (m), ``moving`` (n,) the speed
+    (m/s); ``line``, ``points`` (shapely) and ``tables`` (:func:`_range_tables` of the
+    positions) are made when first needed.
+    """
+
+    t: np.ndarray
+    p: np.ndarray
+    s_m: np.ndarray
+    moving: np.ndarray
+    _line: shapely.LineString | None = None
+    _points: np.ndarray | None = None
+    _tables: tuple[np.ndarray, np.ndarray] | None = None
+
+    @classmethod
+    def of(cls, tr: Trajectory) -> _Drive:
+        t, p = np.asarray(tr.t_s, float), np.asarray(tr.p_enu, float)
+        seg = np.hypot(*np.diff(p[:, :2], axis=0).T)
+        moving = _speed(p, _step_s(t))
+        return cls(t, p, np.concatenate([[0.0], np.cumsum(seg)]), moving)
+
+    @property
+    def line(self) -> shapely.LineString:
+        if self._line is None:
+            self._line = shapely.LineString(self.p[:, :2])
+        return self._line
+
+    @property
+    def points(self) -> np.ndarray:
+        if self._points is None:
+            self._points = shapely.points(self.p[:, 0], self.p[:, 1])
+        return self._points
+
+    @property
+    def tables(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._tables is None:
+            self._tables = _range_tables(self.p[:, :2])
+        return self._tables
+
+
 def _follow_stretches(
-    leader: Trajectory, follower: Trajectory, params: ConvoyParams
+    leader: _Drive, follower: _Drive, params: ConvoyParams, cand: np.ndarray
 ) -> list[tuple[float, float, float, float]]:
     """Stretches where ``follower`` drives the leader's path a steady lag behind.
 
-    Returns ``(t_start, t_end, median_lag_s, distance_m)`` per stretch.
+    Returns ``(t_start, t_end, median_lag_s, distance_m)`` per stretch. ``cand`` (n,)
+    marks the follower's points that pass the cheap necessary conditions
+    (:func:`_candidates`); the exact test (distance to the leader's path, lag) runs on
+    those only, and every other point fails it.
     """
-    tl, pl = np.asarray(leader.t_s, float), np.asarray(leader.p_enu, float)
-    tf, pf = np.asarray(follower.t_s, float), np.asarray(follower.p_enu, float)
-    if len(tl) < 2 or len(tf) < 2:
-        return []
-    path = shapely.LineString(pl[:, :2])
-    seg = np.hypot(*np.diff(pl[:, :2], axis=0).T)
-    s_leader = np.concatenate([[0.0], np.cumsum(seg)])
-    pts = shapely.points(pf[:, 0], pf[:, 1])
-    off_path = shapely.distance(pts, path)
-    s_on = shapely.line_locate_point(path, pts)
-    t_there = np.interp(s_on, s_leader, tl)  # when the leader was where the follower is
-    lag = tf - t_there
-    moving = _speed(pf, float(np.median(np.diff(tf))) if len(tf) > 1 else 1.0)
-    ok = (
+    tl, tf, pf = leader.t, follower.t, follower.p
+    idx = np.flatnonzero(cand)
+    pts = follower.points[idx]
+    off_path = shapely.distance(pts, leader.line)
+    s_on = shapely.line_locate_point(leader.line, pts)
+    t_there = np.interp(s_on, leader.s_m, tl)  # when the leader was where the follower is
+    lag = np.zeros(len(tf))
+    lag[idx] = tf[idx] - t_there
+    ok = np.zeros(len(tf), bool)
+    ok[idx] = (
         (off_path <= params.path_tolerance_m)
-        & (lag >= params.min_lag_s)
-        & (lag <= params.max_lag_s)
-        & (moving >= params.min_speed_mps)
+        & (lag[idx] >= params.min_lag_s)
+        & (lag[idx] <= params.max_lag_s)
+        & (follower.moving[idx] >= params.min_speed_mps)
     )
     out = []
     for a, b in _runs(ok):
@@ -274,18 +417,121 @@ def _follow_stretches(
     return out
 
 
+@dataclass(eq=False)
+class _Fleet:
+    """The possible followers' points end to end, for one vectorised test per leader.
+
+    ``owner`` (N,) is each point's trajectory index; ``first`` / ``last`` (N,) mark each
+    trajectory's first and last point; ``span`` maps an index to its ``[start, stop)``.
+    """
+
+    t: np.ndarray
+    xy: np.ndarray
+    s_m: np.ndarray
+    moving: np.ndarray
+    owner: np.ndarray
+    first: np.ndarray
+    last: np.ndarray
+    span: dict[int, tuple[int, int]]
+
+    @classmethod
+    def of(cls, drives: dict[int, _Drive], members: Sequence[int]) -> _Fleet:
+        parts = [drives[k] for k in members]
+        sizes = np.array([len(d.t) for d in parts], int)
+        stops = np.cumsum(sizes)
+        starts = stops - sizes
+        first = np.zeros(int(stops[-1]), bool)
+        last = np.zeros(int(stops[-1]), bool)
+        first[starts], last[stops - 1] = True, True
+        return cls(
+            np.concatenate([d.t for d in parts]),
+            np.concatenate([d.p[:, :2] for d in parts]),
+            np.concatenate([d.s_m for d in parts]),
+            np.concatenate([d.moving for d in parts]),
+            np.repeat(np.asarray(members, int), sizes),
+            first,
+            last,
+            {k: (int(a), int(b)) for k, a, b in zip(members, starts, stops, strict=True)},
+        )
+
+
+def _candidates(
+    leader: _Drive, fleet: _Fleet, pair_ok: np.ndarray, params: ConvoyParams
+) -> np.ndarray:
+    """Fleet points that could be on a convoy stretch behind ``leader``, shape (N,).
+
+    Necessary conditions of the exact test: moving fast enough; a lag in range is possible
+    (time); within the path tolerance of the box of the leader's positions at the times a
+    lag in range allows (the follower's nearest point on the leader's path lies on a
+    segment driven then); ``pair_ok`` (indexed by trajectory) allows the pair.
+    """
+    tl = leader.t
+    lo_t, hi_t = params.min_lag_s - _EPS, params.max_lag_s + _EPS
+    cand = (
+        pair_ok[fleet.owner]
+        & (fleet.moving >= params.min_speed_mps)
+        & (fleet.t >= tl[0] + lo_t)
+        & (fleet.t <= tl[-1] + hi_t)
+    )
+    sub = np.flatnonzero(cand)
+    if len(sub):
+        n = len(tl)
+        i0 = np.clip(np.searchsorted(tl, fleet.t[sub] - hi_t, side="right") - 1, 0, n - 1)
+        i1 = np.clip(np.searchsorted(tl, fleet.t[sub] - lo_t, side="left"), 0, n - 1)
+        box_lo, box_hi = _range_box(leader.tables, i0, np.maximum(i0, i1))
+        tol = params.path_tolerance_m + _EPS
+        xy = fleet.xy[sub]
+        cand[sub] = np.all((xy >= box_lo - tol) & (xy <= box_hi + tol), axis=1)
+    return cand
+
+
 def detect_convoys(
     trajectories: Sequence[Trajectory], params: ConvoyParams | None = None
 ) -> list[ActivityEvent]:
-    """Groups of two or more targets driving the same path in order, steadily spaced."""
+    """Groups of two or more targets driving the same path in order, steadily spaced.
+
+    Ordered pairs (leader, follower) that cannot qualify are skipped first: a follower
+    that drove less than ``min_distance_m`` in all, or whose box is more than the path
+    tolerance from the leader's, or whose times cannot lag the leader's by
+    ``min_lag_s`` .. ``max_lag_s``; then, per leader for all followers at once, those
+    without a run of :func:`_candidates` points ``min_distance_m`` long. The events are
+    exactly those of the all-pairs
+    :func:`~demtrack.core.activity_reference.detect_convoys_reference`.
+    """
     params = params or ConvoyParams()
     ids = _ids(trajectories)
+    n, first_t, last_t, lo, hi = _extents(trajectories)
+    valid = n >= 2
+    drives = {k: _Drive.of(tr) for k, tr in enumerate(trajectories) if valid[k]}
+    length = np.array([drives[k].s_m[-1] if k in drives else 0.0 for k in range(len(valid))])
+    need = params.min_distance_m - _EPS * (1.0 + params.min_distance_m)
+    with np.errstate(invalid="ignore"):
+        cand = (  # [leader, follower]
+            valid[:, None]
+            & (valid & (length >= need))[None, :]
+            & (_box_gaps(lo, hi) <= params.path_tolerance_m + _EPS)
+            & (last_t[None, :] >= first_t[:, None] + params.min_lag_s - _EPS)
+            & (first_t[None, :] <= last_t[:, None] + params.max_lag_s + _EPS)
+        )
+    np.fill_diagonal(cand, False)
     pairs = []
-    for a, lead in enumerate(trajectories):
-        for b, follow in enumerate(trajectories):
-            if a != b:
-                for t0, t1, lag, dist in _follow_stretches(lead, follow, params):
-                    pairs.append((a, b, t0, t1, lag, dist))
+    members = np.flatnonzero(cand.any(axis=0)).tolist()
+    leaders = np.flatnonzero(cand.any(axis=1)).tolist()
+    fleet = _Fleet.of(drives, members) if members else None
+    for a in leaders:
+        if fleet is None:  # no follower at all
+            break
+        ok = _candidates(drives[a], fleet, cand[a], params)
+        # runs of candidates, broken where one follower's points end and the next begin
+        before = np.concatenate([[False], ok[:-1]]) & ~fleet.first
+        after = np.concatenate([ok[1:], [False]]) & ~fleet.last
+        r0, r1 = np.flatnonzero(ok & ~before), np.flatnonzero(ok & ~after)
+        long_enough = fleet.s_m[r1] - fleet.s_m[r0] >= need
+        for b in np.unique(fleet.owner[r0[long_enough]]).tolist():
+            start, stop = fleet.span[b]
+            found = _follow_stretches(drives[a], drives[b], params, ok[start:stop])
+            for q0, q1, lag, dist in found:
+                pairs.append((a, b, q0, q1, lag, dist))
     # Join pairs that share a vehicle and overlap in time (a leader-follower chain).
     groups: list[dict[str, Any]] = []
     for a, b, t0, t1, lag, dist in sorted(pairs, key=lambda q: q[2]):
