@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -16,29 +15,18 @@ from urllib.parse import urlsplit
 
 import httpx2 as httpx
 
+# The browser and port set-up the benchmarks use, re-exported for the tests.
+from demtrack.bench.console_harness import CHROMIUM as CHROMIUM
+from demtrack.bench.console_harness import LAUNCH_ARGS as LAUNCH_ARGS
+from demtrack.bench.console_harness import free_port as free_port
+
 REPO = Path(__file__).resolve().parents[2]
-CHROMIUM = Path("/usr/bin/chromium")
 OL_JS = REPO / "web" / "node_modules" / "ol" / "dist" / "ol.js"
 SHOTS = REPO / "test-artifacts" / "web"
 TOKEN = "web-test-operator-token"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
-LAUNCH_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
 SCENARIO = "passing-vehicles"
 LOOPBACK = {"127.0.0.1", "localhost", "::1", "[::1]"}
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @dataclass
