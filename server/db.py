@@ -189,6 +189,14 @@ def dumps_json(obj: Any) -> str:
     return json.dumps(obj, separators=(",", ":"), allow_nan=False)
 
 
+def _detection_row(r: Sequence[Any]) -> tuple[int, Detection]:
+    """``(id, Detection)`` of a detections row read in its column order.
+
+    Columns: ``id, t_s, sensor, u_min, v_min, u_max, v_max, cls, score, local_id``.
+    """
+    return r[0], Detection(r[1], r[2], (r[3], r[4], r[5], r[6]), r[7], r[8], r[9])
+
+
 class Store:
     """The console's SQLite file (see the module docstring)."""
 
@@ -418,9 +426,7 @@ class Store:
             f" WHERE {where} ORDER BY d.id LIMIT ?",  # noqa: S608  (fixed clause)
             (after_id, limit),
         )
-        return [
-            (r[0], Detection(r[1], r[2], (r[3], r[4], r[5], r[6]), r[7], r[8], r[9])) for r in rows
-        ]
+        return [_detection_row(r) for r in rows]
 
     def detections_in_window(
         self,
@@ -441,9 +447,7 @@ class Store:
             " ORDER BY t_s, id LIMIT ?",  # noqa: S608  (placeholders only)
             (*sensors, t_from, t_to, after_id, limit),
         )
-        return [
-            (r[0], Detection(r[1], r[2], (r[3], r[4], r[5], r[6]), r[7], r[8], r[9])) for r in rows
-        ]
+        return [_detection_row(r) for r in rows]
 
     def fixes(self, after_id: int = 0, limit: int = 1000) -> list[dict[str, Any]]:
         """Stored fix bodies with ``detection_id > after_id``, in detection order."""
