@@ -258,10 +258,12 @@ class Tracker:
         recent ones costs what they hold, not what every track ever held.
         """
         recs = [r for r in self._live if r.track_id is not None]
-        if include_ended and ended_after_s is None:
-            recs += self._ended
-        elif include_ended and ended_after_s is not None:
-            recs += [r for r in self._ended if r.points and r.points[-1].t_s >= ended_after_s]
+        if include_ended:
+            recs += [
+                r
+                for r in self._ended
+                if ended_after_s is None or (r.points and r.points[-1].t_s >= ended_after_s)
+            ]
         return [self._to_track(r) for r in sorted(recs, key=lambda r: r.track_id or 0)]
 
     @property
