@@ -25,7 +25,6 @@ it can be published while the next evaluation runs.
 
 from __future__ import annotations
 
-import operator
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -80,9 +79,9 @@ class Window:
     sensors: tuple[tuple[str, ...], ...]
 
 
-def _thin(track: Track, t_all: np.ndarray, t_from: float, sample_s: float) -> Window | None:
-    """``track`` from ``t_from`` on, thinned to points ``sample_s`` apart (``t_all``: its times)."""
-    t = t_all
+def _thin(track: Track, t_from: float, sample_s: float) -> Window | None:
+    """``track`` from ``t_from`` on, thinned to points ``sample_s`` apart."""
+    t = track.t_s
     k0 = int(np.searchsorted(t, t_from))
     if k0 >= len(t):
         return None
@@ -126,8 +125,6 @@ class LiveEvents:
         self._crossings: dict[str, float] = {}
         self._closed: dict[str, float] = {}
         self._handoff: dict[int, tuple[str | None, str | None]] = {}
-        #: Each track's times as last read (track id -> (track, t_s)): see :meth:`_times`.
-        self._t_cache: dict[int, tuple[Track, np.ndarray]] = {}
         for body in known:
             if body["kind"] == "handoff":
                 d = body["details"]
@@ -166,32 +163,6 @@ class LiveEvents:
         body.update(lat_deg=lat, lon_deg=lon, h_m=h)
         return body
 
-    def _times(self, track: Track) -> np.ndarray:
-        """``track.t_s``, reusing what was read of the same points at the last evaluation.
-
-        The tracker hands back the same :class:`Track` while it is unchanged and otherwise
-        a new one sharing the unchanged :class:`TrackPoint` objects (it revises recent points
-        and appends), so only the points that are not the very objects read before are read.
-        """
-        old = self._t_cache.get(track.id)
-        if old is not None and old[0] is track:
-            return old[1]
-        pts = track.points
-        head = np.zeros(0)
-        if old is not None:
-            before = old[0].points
-            k = min(len(before), len(pts))
-            while k > 0 and before[k - 1] is not pts[k - 1]:
-                k -= 1
-            # not a revised tail after all (an earlier point replaced): read everything
-            if all(map(operator.is_, before[:k], pts[:k])):
-                head = old[1][:k]
-        k = len(head)
-        tail = np.fromiter((p.t_s for p in pts[k:]), dtype=np.float64, count=len(pts) - k)
-        t = np.concatenate([head, tail])
-        self._t_cache[track.id] = (track, t)
-        return t
-
     def due(self, t_now: float) -> bool:
         """Whether an evaluation is due at scenario time ``t_now`` (s)."""
         return self.last_eval_t is None or t_now - self.last_eval_t >= self.params.every_s
@@ -207,11 +178,9 @@ class LiveEvents:
         windows = {}
         for tr in tracks:
             if tr.points and tr.points[-1].t_s >= t_from:
-                w = _thin(tr, self._times(tr), t_from, prm.sample_s)
+                w = _thin(tr, t_from, prm.sample_s)
                 if w is not None:
                     windows[w.id] = w
-        held = {tr.id for tr in tracks}
-        self._t_cache = {k: v for k, v in self._t_cache.items() if k in held}
         ws = list(windows.values())
         out: list[dict[str, Any]] = []
         found = detect_loitering(ws, prm.loiter) + detect_rendezvous(ws, prm.rendezvous)
@@ -287,7 +256,7 @@ class LiveEvents:
         for tr in tracks:
             if tr.id not in live_ids or len(tr.points) < 2:
                 continue
-            t = self._times(tr)
+            t = tr.t_s
             last = tr.points[-1]
             k = max(0, int(np.searchsorted(t, t[-1] - 1.0)) - 1)
             if t[-1] - t[k] <= 0:
