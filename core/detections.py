@@ -62,6 +62,7 @@ __all__ = [
     "REASONS",
     "IngestIssue",
     "IngestReport",
+    "read_detection_records",
     "read_detections",
     "read_detections_csv",
     "read_detections_jsonl",
@@ -347,11 +348,39 @@ def read_detections_jsonl(
     return col.result()
 
 
+def read_detection_records(
+    records: Iterable[Any],
+    *,
+    sensors: Mapping[str, tuple[int, int]] | None = None,
+    max_examples: int = 5,
+    edge_tolerance_px: float = 1.0,
+) -> tuple[list[Detection], IngestReport]:
+    """Check already parsed JSON records (dicts) with the JSON Lines rules.
+
+    The same answer as :func:`read_detections_jsonl` on the records written one per line
+    (an issue's ``line`` is the record's 1-based position), without the text round trip.
+    """
+    col = _Collector(sensors, max_examples, edge_tolerance_px)
+    for line_no, obj in enumerate(records, start=1):
+        try:
+            rec = _object_record(obj)
+        except _Skip as skip:
+            col.n_records += 1
+            col.skip(line_no, skip.reason, skip.message)
+            continue
+        col.add(line_no, rec)
+    return col.result()
+
+
 def _json_record(text: str) -> dict[str, Any]:
     try:
         obj = json.loads(text)
     except json.JSONDecodeError as err:
         raise _Skip("malformed", f"invalid JSON: {err.msg} at column {err.colno}") from None
+    return _object_record(obj)
+
+
+def _object_record(obj: Any) -> dict[str, Any]:
     if not isinstance(obj, dict):
         raise _Skip("malformed", f"a record must be a JSON object, got {type(obj).__name__}")
     for key in ("t", "sensor", "bbox", "class"):
@@ -362,7 +391,7 @@ def _json_record(text: str) -> dict[str, Any]:
         raise _Skip("malformed", f"sensor must be a non-empty string, got {sensor!r}")
     if not isinstance(cls, str):
         raise _Skip("malformed", f"class must be a string, got {cls!r}")
-    if not isinstance(box, list) or len(box) != 4:
+    if not isinstance(box, list | tuple) or len(box) != 4:
         raise _Skip("malformed", f"bbox must be a list of 4 numbers, got {box!r}")
     local_id = obj.get("local_id")
     if local_id is not None:

@@ -32,6 +32,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import msgspec
+
 from demtrack.core.tracking.types import Detection
 
 __all__ = [
@@ -184,9 +186,24 @@ class StoredBatch:
     duplicate: bool = False
 
 
+_ENCODER = msgspec.json.Encoder()
+
+
 def dumps_json(obj: Any) -> str:
-    """Compact JSON, no NaN: how every stored body is encoded."""
-    return json.dumps(obj, separators=(",", ":"), allow_nan=False)
+    """Compact JSON: how every stored body and stream message is encoded.
+
+    msgspec's encoder (about 9x faster than :func:`json.dumps` on fix and track bodies):
+    the same text as ``json.dumps(obj, separators=(",", ":"))`` except that exponents
+    carry no ``+`` (``1e21``) and NaN or infinities become ``null`` (JSON has neither;
+    the server's numbers are finite by construction).
+    """
+    return _ENCODER.encode(obj).decode()
+
+
+def _next_id(c: sqlite3.Connection, sql: str) -> int:
+    """One more than the integer ``sql`` selects (1 when it selects nothing or NULL)."""
+    row = c.execute(sql).fetchone()
+    return 1 if row is None or row[0] is None else int(row[0]) + 1
 
 
 def _detection_row(r: Sequence[Any]) -> tuple[int, Detection]:
@@ -260,15 +277,19 @@ class Store:
                 (batch_key, report["n_records"], report["accepted"], dumps_json(report)),
             )
             batch_id = int(cur.lastrowid or 0)
-            ids = []
-            for d in detections:
-                cur = c.execute(
-                    "INSERT INTO detections (batch_id, t_s, sensor, u_min, v_min, u_max, v_max,"
-                    " cls, score, local_id) VALUES (?,?,?,?,?,?,?,?,?,?)",
-                    (batch_id, d.t_s, d.sensor, *d.bbox, d.cls, d.score, d.local_id),
-                )
-                ids.append(int(cur.lastrowid or 0))
-            return StoredBatch(batch_id, tuple(ids), report)
+            # Ids are given explicitly (the next ones, in record order: the write lock and
+            # BEGIN IMMEDIATE make this the only writer) so one executemany inserts them.
+            first = _next_id(c, "SELECT MAX(id) FROM detections")
+            ids = tuple(range(first, first + len(detections)))
+            c.executemany(
+                "INSERT INTO detections (id, batch_id, t_s, sensor, u_min, v_min, u_max, v_max,"
+                " cls, score, local_id) VALUES (?,?,?,?,?,?,?,?,?,?,?)",
+                [
+                    (i, batch_id, d.t_s, d.sensor, *d.bbox, d.cls, d.score, d.local_id)
+                    for i, d in zip(ids, detections, strict=True)
+                ],
+            )
+            return StoredBatch(batch_id, ids, report)
 
         return self._tx(run)
 
@@ -371,12 +392,17 @@ class Store:
                         body["id"],
                     ),
                 )
-            seqs = []
-            for kind, payload in events:
-                cur = c.execute(
-                    "INSERT INTO events (type, payload) VALUES (?, ?)", (kind, dumps_json(payload))
-                )
-                seqs.append(int(cur.lastrowid or 0))
+            rows = [(kind, dumps_json(payload)) for kind, payload in events]
+            # AUTOINCREMENT: a sequence number is never reused, even after deletes.
+            first = max(
+                _next_id(c, "SELECT MAX(seq) FROM events"),
+                _next_id(c, "SELECT seq FROM sqlite_sequence WHERE name = 'events'"),
+            )
+            seqs = list(range(first, first + len(rows)))
+            c.executemany(
+                "INSERT INTO events (seq, type, payload) VALUES (?, ?, ?)",
+                [(q, kind, text) for q, (kind, text) in zip(seqs, rows, strict=True)],
+            )
             return seqs
 
         return self._tx(run, sync=False)  # derived rows: see the module docstring

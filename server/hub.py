@@ -10,9 +10,10 @@ the others; it reconnects with ``?since=N`` and gets what it missed from the eve
 from __future__ import annotations
 
 import asyncio
-import json
 from dataclasses import dataclass, field
 from typing import Any
+
+from .db import dumps_json
 
 __all__ = ["Client", "Hub", "OVERFLOW"]
 
@@ -62,7 +63,7 @@ class Hub:
 
     def publish(self, messages: list[dict[str, Any]]) -> None:
         """Queue messages (dicts with ``seq``) for every client; on the event loop."""
-        encoded = [(int(m["seq"]), json.dumps(m, allow_nan=False)) for m in messages]
+        encoded = [(int(m["seq"]), dumps_json(m)) for m in messages]
         if encoded:
             self.last_seq = max(self.last_seq, encoded[-1][0])
         for client in list(self.clients):

@@ -32,8 +32,6 @@ Live events
 from __future__ import annotations
 
 import heapq
-import io
-import json
 import logging
 import math
 import threading
@@ -43,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from demtrack.core.activity import ConvoyParams, LoiterParams, RendezvousParams
-from demtrack.core.detections import read_detections_jsonl
+from demtrack.core.detections import read_detection_records
 from demtrack.core.errors import DemtrackError
 from demtrack.core.fix_builder import build_fixes, sensor_sizes
 from demtrack.core.site import Site
@@ -356,9 +354,8 @@ class Pipeline:
             for s, t in sorted(self._last_t.items())
             if s in self.sizes
         ]
-        text = "".join(json.dumps(r) + "\n" for r in [*seeds, *records])
-        dets, report = read_detections_jsonl(
-            io.StringIO(text), sensors=self.sizes, max_examples=_MAX_ISSUES
+        dets, report = read_detection_records(
+            [*seeds, *records], sensors=self.sizes, max_examples=_MAX_ISSUES
         )
         n_seed = len(seeds)
         if len(dets) < n_seed or report.n_records != n_seed + len(records):

@@ -14,11 +14,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .hypothesiser import mahalanobis2
 from .protocols import Candidates, MotionModel
 
 __all__ = ["GaussianState", "KalmanFilter"]
 
 _H = np.hstack([np.eye(2), np.zeros((2, 2))])
+_I4 = np.eye(4)
+_I4.setflags(write=False)
+_H.setflags(write=False)
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,10 +63,12 @@ def _kalman(x: np.ndarray, p: np.ndarray, z_xy: np.ndarray, r: np.ndarray) -> tu
 
     Joseph form keeps P symmetric positive.
     """
-    s = _H @ p @ _H.T + r
-    k = np.linalg.solve(s, _H @ p).T  # P H^T S^-1, S symmetric
-    x_new = x + k @ (z_xy - _H @ x)
-    ikh = np.eye(4) - k @ _H
+    s = p[:2, :2] + r  # H P H^T + R, H picking the position
+    det = s[0, 0] * s[1, 1] - s[0, 1] * s[1, 0]
+    s_inv = np.array([[s[1, 1], -s[0, 1]], [-s[1, 0], s[0, 0]]]) / det
+    k = (s_inv @ p[:2, :]).T  # P H^T S^-1 (S symmetric): the 2 x 2 inverse in closed form
+    x_new = x + k @ (z_xy - x[:2])
+    ikh = _I4 - k @ _H
     p_new = ikh @ p @ ikh.T + k @ r @ k.T
     return x_new, 0.5 * (p_new + p_new.T)
 
@@ -158,13 +164,13 @@ class KalmanFilter:
         lik = np.empty(m)
         xs = np.empty((m, 4))
         ps = np.empty((m, 4, 4))
+        covs = cands.covariances()
+        s = state.P[None, :2, :2] + covs
+        d2 = mahalanobis2(s, cands.z_enu[:, :2] - state.x[None, :2])
+        det = s[:, 0, 0] * s[:, 1, 1] - s[:, 0, 1] * s[:, 1, 0]
+        lik[:] = cands.weight * np.exp(-0.5 * d2) / (2 * np.pi * np.sqrt(det))
         for j in range(m):
-            r = cands.cov(j)
-            s = state.P[:2, :2] + r
-            nu = cands.z_enu[j, :2] - state.x[:2]
-            d2 = float(nu @ np.linalg.solve(s, nu))
-            lik[j] = cands.weight[j] * np.exp(-0.5 * d2) / (2 * np.pi * np.sqrt(np.linalg.det(s)))
-            xs[j], ps[j] = _kalman(state.x, state.P, cands.z_enu[j, :2], r)
+            xs[j], ps[j] = _kalman(state.x, state.P, cands.z_enu[j, :2], covs[j])
         total = self.clutter_density_per_m2 + lik.sum()
         beta = lik / total
         beta0 = self.clutter_density_per_m2 / total
@@ -204,8 +210,9 @@ class KalmanFilter:
         """Predictive density (1/m^2) of a position ``xy`` (2,) known to ``cov_xy`` (2, 2)."""
         s = state.P[:2, :2] + cov_xy
         nu = np.asarray(xy, dtype=np.float64) - state.x[:2]
-        d2 = float(nu @ np.linalg.solve(s, nu))
-        return float(np.exp(-0.5 * d2) / (2.0 * np.pi * np.sqrt(np.linalg.det(s))))
+        d2 = float(mahalanobis2(s, nu))
+        det = float(s[0, 0] * s[1, 1] - s[0, 1] * s[1, 0])
+        return float(np.exp(-0.5 * d2) / (2.0 * np.pi * np.sqrt(det)))
 
     def estimate(self, state: GaussianState) -> tuple[np.ndarray, np.ndarray | None]:
         """Position (3,) and horizontal covariance (2, 2)."""

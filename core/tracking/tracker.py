@@ -45,7 +45,7 @@ from .protocols import (
     Reacquirer,
     SingleHypothesis,
 )
-from .reacquire import MotionReacquirer
+from .reacquire import MotionReacquirer, velocity_gaussian, velocity_prior_density
 from .types import Fix, Track, TrackPoint
 
 __all__ = ["ClassComponents", "Tracker", "TrackerComponents", "find_gaps"]
@@ -140,6 +140,55 @@ def find_gaps(t_s: np.ndarray, threshold_s: float) -> list[tuple[float, float]]:
         return []
     dt = np.diff(t)
     return [(float(t[i]), float(t[i + 1])) for i in np.flatnonzero(dt > threshold_s)]
+
+
+#: How far back from the end :func:`_shared_prefix` looks point by point.
+_TAIL_WINDOW = 32
+
+
+def _shared_prefix(old: tuple[TrackPoint, ...], new: tuple[TrackPoint, ...]) -> int:
+    """How many leading points ``old`` and ``new`` share (the same objects).
+
+    A live track changes at its end (new points, the last few revised by smoothing), so
+    the shared prefix is looked for within the last :data:`_TAIL_WINDOW` points; 0 when
+    the difference lies earlier (a merged or trimmed track).
+    """
+    m = min(len(old), len(new))
+    k = max(0, m - _TAIL_WINDOW)
+    if old[:k] != new[:k]:  # identity comparison (eq=False), in C
+        return 0
+    while k < m and old[k] is new[k]:
+        k += 1
+    return k
+
+
+def _grown_track(old: Track, points: tuple[TrackPoint, ...], gap_threshold_s: float) -> Track:
+    """The :class:`Track` of ``points``, reusing what ``old`` (same id) already holds.
+
+    Equal to building it from scratch (times, positions, sensors and gaps), at the cost of
+    the changed tail rather than the whole history: a long live track changes on every
+    batch, and rebuilding its arrays each time made a session's cost grow with its age.
+    """
+    same = _shared_prefix(old.points, points)
+    tail = points[same:]
+    t_new = np.fromiter((p.t_s for p in tail), dtype=np.float64, count=len(tail))
+    t_s = np.concatenate([old.t_s[:same], t_new])
+    p_new = np.stack([p.p_enu for p in tail]) if tail else np.zeros((0, 3))
+    p_enu = np.concatenate([old.p_enu[:same], p_new])
+    tail_old = frozenset().union(*(p.sensors for p in old.points[same:]))
+    tail_new = frozenset().union(*(p.sensors for p in tail))
+    if tail_old <= tail_new:
+        # union(prefix) | tail_new == old.sensors | tail_new when tail_old <= tail_new
+        sensors = old.sensors | tail_new
+    else:
+        sensors = frozenset().union(*(p.sensors for p in points))
+    gaps = find_gaps(t_s, gap_threshold_s)
+    track = Track(old.id, old.cls, points, sensors, tuple(gaps))
+    t_s.setflags(write=False)
+    p_enu.setflags(write=False)
+    track.__dict__["t_s"] = t_s  # the cached properties' values, computed already
+    track.__dict__["p_enu"] = p_enu
+    return track
 
 
 class Tracker:
@@ -239,12 +288,15 @@ class Tracker:
         # tuple equality compares TrackPoints by identity (eq=False): same objects, same track
         if old is not None and old.id == rec.track_id and old.points == points:
             return old
-        sensors = frozenset().union(*(p.sensors for p in points))
-        t_s = np.fromiter((p.t_s for p in points), dtype=np.float64, count=len(points))
-        gaps = find_gaps(t_s, self.config.gap_threshold_s)
         if rec.track_id is None:
             raise TrackingError("internal: a tentative track cannot be exported")
-        track = Track(rec.track_id, rec.cls, points, sensors, tuple(gaps))  # type: ignore[arg-type]
+        if old is not None and old.id == rec.track_id:
+            track = _grown_track(old, points, self.config.gap_threshold_s)
+        else:
+            sensors = frozenset().union(*(p.sensors for p in points))
+            t_s = np.fromiter((p.t_s for p in points), dtype=np.float64, count=len(points))
+            gaps = find_gaps(t_s, self.config.gap_threshold_s)
+            track = Track(rec.track_id, rec.cls, points, sensors, tuple(gaps))  # type: ignore[arg-type]
         rec.exported = track
         return track
 
@@ -507,7 +559,11 @@ class Tracker:
         ``config.reacquire_s`` ago, whose last fix precedes ``rec``'s first (so the two
         were never seen at once: they cannot be two objects side by side). Each one's
         state is predicted to ``t`` by its own motion model, and the density it gives
-        ``rec``'s position (with ``rec``'s covariance) must beat the clutter density.
+        ``rec``'s position (with ``rec``'s covariance) must beat the clutter density. Where
+        both states have a velocity the density is joint over position and velocity, and
+        the clutter density is multiplied by the density a new track's velocity prior
+        (zero mean, the class's ``init_speed_sigma_m_s``) gives ``rec``'s velocity: an
+        object moving against the lost one's predicted motion is not taken for it.
         """
         window = self.config.reacquire_s
         if window <= 0:
@@ -521,14 +577,32 @@ class Tracker:
         pool = [r for r in self._live if r.track_id is not None] + [
             r for r in self._ended if t - r.t_update <= window
         ]
-        best, best_density = None, self.config.clutter_density_per_m2
+        # With a velocity on both sides the densities are joint over position and
+        # velocity; "a new object" then has the clutter density times what the velocity
+        # prior of a new track gives the new track's velocity.
+        vel = velocity_gaussian(rec.state)
+        v_xy, cov_v = (None, None) if vel is None else vel
+        threshold = self.config.clutter_density_per_m2
+        if vel is not None:
+            speed_sigma = self.config.params(rec.cls).init_speed_sigma_m_s
+            threshold *= velocity_prior_density(vel[0], vel[1], speed_sigma)
+        best, best_density = None, threshold
         for old in pool:
             if old.cls != rec.cls or old.t_update >= rec.t_created:
                 continue
             # a private generator: looking must not change the tracker's random stream
             last = old.points[-1]
             d = reacquirer.density(
-                flt, old.state, last.t_s, last.p_enu[:2], t, xy, cov, np.random.default_rng(old.uid)
+                flt,
+                old.state,
+                last.t_s,
+                last.p_enu[:2],
+                t,
+                xy,
+                cov,
+                np.random.default_rng(old.uid),
+                v_xy=v_xy,
+                cov_v=cov_v,
             )
             if d > best_density:
                 best, best_density = old, d

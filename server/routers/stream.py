@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
 
 from fastapi import APIRouter, WebSocket
@@ -17,6 +16,7 @@ from pydantic import ValidationError
 from starlette.concurrency import run_in_threadpool
 from starlette.websockets import WebSocketDisconnect
 
+from ..db import dumps_json
 from ..hub import OVERFLOW, Client
 from ..messages import ErrorMessage, HelloMessage, PongMessage, ResumeMessage, client_adapter
 from ..security import token_ok
@@ -41,7 +41,7 @@ async def _replay(ws: WebSocket, state: ConsoleState, client: Client, since: int
         while True:
             rows = await run_in_threadpool(state.store.events_since, after, _PAGE)
             for msg in rows:
-                await _send(ws, json.dumps(msg, allow_nan=False))
+                await _send(ws, dumps_json(msg))
                 after = msg["seq"]
             if len(rows) < _PAGE:
                 break

@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 
 from demtrack.core.detections import (
     REASONS,
+    read_detection_records,
     read_detections,
     read_detections_csv,
     read_detections_jsonl,
@@ -178,3 +179,14 @@ def test_no_record_is_lost(lines):
     assert rep.n_accepted == len(dets)
     assert rep.n_accepted + sum(rep.counts.values()) == rep.n_records
     assert set(rep.counts) == set(REASONS)
+
+
+@given(st.lists(st.one_of(record, st.integers(), st.lists(st.integers(), max_size=2)), max_size=30))
+@settings(max_examples=50, deadline=None)
+def test_parsed_records_get_the_jsonl_answer(records):
+    """Records checked as objects get the answer of the same records as JSON Lines."""
+    text = "".join(json.dumps(r) + "\n" for r in records)
+    want = read_detections_jsonl(io.StringIO(text), sensors=SENSORS, max_examples=100)
+    got = read_detection_records(records, sensors=SENSORS, max_examples=100)
+    assert got[0] == want[0]
+    assert got[1] == want[1]
