@@ -47,6 +47,7 @@ __all__ = [
     "SWEEP_SLACK_FACTOR",
     "BlindSpot",
     "PanTiltLimits",
+    "blind_spot_labels",
     "blind_spots",
     "target_visible_fraction",
     "viewshed",
@@ -81,12 +82,17 @@ class PanTiltLimits:
 
 @dataclass(frozen=True)
 class BlindSpot:
-    """A connected area no camera sees: size and where it is (site frame, m)."""
+    """A connected area no camera sees: size and where it is (site frame, m).
+
+    ``label`` is the area's value in :func:`blind_spot_labels` of the same coverage (its
+    cells are ``labels == label``); 0 when unknown.
+    """
 
     area_m2: float
     centroid_e_m: float
     centroid_n_m: float
     bbox: tuple[float, float, float, float]
+    label: int = 0
 
 
 def _half_fov_deg(camera: Camera) -> tuple[float, float]:
@@ -289,14 +295,27 @@ def _clear_sight(
     return seen
 
 
+def blind_spot_labels(coverage_count: np.ndarray, dem: Dem) -> np.ndarray:
+    """The unseen areas with data, labelled 1, 2, ... by 8-connected component (0 elsewhere).
+
+    Returns
+    -------
+    ndarray, int32, shape ``dem.grid.shape``
+    """
+    blind = (np.asarray(coverage_count) == 0) & ~dem.nodata
+    labels, _ = ndimage.label(blind, structure=np.ones((3, 3), bool), output=np.int32)
+    return labels
+
+
 def blind_spots(
     coverage_count: np.ndarray, dem: Dem, *, min_area_m2: float = 0.0
 ) -> list[BlindSpot]:
     """Connected areas (8-neighbour) with zero coverage and data, largest first."""
-    blind = (np.asarray(coverage_count) == 0) & ~dem.nodata
-    labels, n = ndimage.label(blind, structure=np.ones((3, 3), bool))
+    labels = blind_spot_labels(coverage_count, dem)
+    n = int(labels.max(initial=0))
     if n == 0:
         return []
+    blind = labels > 0
     cell_area = dem.grid.cell_m**2
     index = np.arange(1, n + 1)
     sizes = ndimage.sum(blind, labels, index) * cell_area
@@ -311,11 +330,8 @@ def blind_spots(
         rs, cs = boxes[k]
         x0, y1 = dem.grid.from_grid(np.array(cs.start - 0.5), np.array(rs.start - 0.5))
         x1, y0 = dem.grid.from_grid(np.array(cs.stop - 0.5), np.array(rs.stop - 0.5))
-        out.append(
-            BlindSpot(
-                float(sizes[k]), float(e), float(n_), (float(x0), float(y0), float(x1), float(y1))
-            )
-        )
+        box = (float(x0), float(y0), float(x1), float(y1))
+        out.append(BlindSpot(float(sizes[k]), float(e), float(n_), box, int(k) + 1))
     return out
 
 

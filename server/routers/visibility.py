@@ -18,13 +18,19 @@ from starlette.concurrency import run_in_threadpool
 
 from demtrack.core.site import Sensor
 from demtrack.core.target_heights import DEFAULT_TARGET_HEIGHT_M
-from demtrack.core.visibility import blind_spots, viewshed
+from demtrack.core.visibility import blind_spot_labels, blind_spots, viewshed
 
 from ..imagery import png_bytes
 from ..state import ConsoleState, StateDep
 from .sensors import sensor_or_404
 
-__all__ = ["COVERAGE_RGBA", "coverage_rgba", "router", "viewshed_multipolygon"]
+__all__ = [
+    "COVERAGE_RGBA",
+    "blind_spot_outlines",
+    "coverage_rgba",
+    "router",
+    "viewshed_multipolygon",
+]
 
 router = APIRouter(tags=["visibility"])
 _PNG = {"content": {"image/png": {}}, "description": "PNG image"}
@@ -137,6 +143,28 @@ def viewshed_multipolygon(mask: np.ndarray, transform: Any) -> list[list[list[li
         poly = orient(shape(geom), sign=1.0)
         rings = [poly.exterior, *poly.interiors]
         out.append([[[float(x), float(y)] for x, y in r.coords] for r in rings])
+    return out
+
+
+def blind_spot_outlines(
+    labels: np.ndarray, wanted: list[int], transform: Any
+) -> list[list[list[list[list[float]]]]]:
+    """The cells ``labels == k`` for each ``k`` in ``wanted``, as MultiPolygon coordinates.
+
+    Each area is vectorised (:func:`viewshed_multipolygon`) within its bounding window
+    only, so the cost follows the areas listed, not the grid. ``labels`` is
+    :func:`~demtrack.core.visibility.blind_spot_labels` (int, DEM grid shape); the answer
+    is in the site frame (m) of ``transform``, edges on cell boundaries.
+    """
+    from rasterio.transform import Affine
+    from scipy import ndimage
+
+    boxes = ndimage.find_objects(labels, max_label=max(wanted, default=0))
+    out = []
+    for k in wanted:
+        rs, cs = boxes[k - 1]
+        origin = transform @ Affine.translation(cs.start, rs.start)  # the window's corner
+        out.append(viewshed_multipolygon(labels[rs, cs] == k, origin))
     return out
 
 
@@ -255,6 +283,9 @@ async def coverage_json(
 
     The area each sensor sees, the share of the site seen by at least k sensors, and the
     blind spots (8-connected unseen areas of at least ``min_area_m2``), largest first.
+    Each listed blind spot has its bounding box (``bbox_enu``) and its outline
+    (``outline_enu``: MultiPolygon coordinates in the site frame, m, along cell edges,
+    covering exactly the spot's cells; exteriors counter-clockwise).
     """
 
     def make() -> dict[str, Any]:
@@ -265,6 +296,8 @@ async def coverage_json(
         share = 1.0 / data_cells if data_cells else 0.0
         spots = blind_spots(count, site.dem, min_area_m2=min_area_m2)
         shown = spots[:limit]
+        labels = blind_spot_labels(count, site.dem)
+        outlines = blind_spot_outlines(labels, [b.label for b in shown], site.dem.grid.transform)
         e = np.array([b.centroid_e_m for b in shown], float)
         n = np.array([b.centroid_n_m for b in shown], float)
         lat, lon, _ = site.frame.to_geodetic(e, n, np.zeros(len(e)))
@@ -299,8 +332,11 @@ async def coverage_json(
                     "centroid_enu": [b.centroid_e_m, b.centroid_n_m],
                     "centroid_lonlat": [float(lo), float(la)],
                     "bbox_enu": list(b.bbox),
+                    "outline_enu": outline,
                 }
-                for b, lo, la in zip(shown, np.atleast_1d(lon), np.atleast_1d(lat), strict=True)
+                for b, lo, la, outline in zip(
+                    shown, np.atleast_1d(lon), np.atleast_1d(lat), outlines, strict=True
+                )
             ],
         }
 

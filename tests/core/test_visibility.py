@@ -7,7 +7,7 @@ from demtrack.core.camera import Camera, Intrinsics
 from demtrack.core.dem import Dem
 from demtrack.core.errors import CameraError
 from demtrack.core.grid import GridSpec
-from demtrack.core.visibility import PanTiltLimits, blind_spots, viewshed
+from demtrack.core.visibility import PanTiltLimits, blind_spot_labels, blind_spots, viewshed
 
 INTR = Intrinsics(100.0, 100.0, 99.5, 74.5, 200, 150)
 
@@ -139,6 +139,10 @@ def test_blind_spots_are_connected_areas_largest_first():
     assert spots[0].centroid_e_m == pytest.approx(x[2:6, 2:5].mean())
     assert spots[0].centroid_n_m == pytest.approx(y[2:6, 2:5].mean())
     assert spots[0].bbox == pytest.approx((-38.0, 34.0, -35.0, 38.0))  # cell edges
+    labels = blind_spot_labels(count, dem)  # each spot's cells, by its label
+    assert (labels == spots[0].label)[2:6, 2:5].all() and (labels == spots[0].label).sum() == 12
+    assert (labels == spots[1].label)[10:12, 15:17].all() and (labels == spots[1].label).sum() == 4
+    assert (labels > 0).sum() == 16
     assert len(blind_spots(count, dem, min_area_m2=5.0)) == 1
 
 

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from PIL import Image
 from rasterio.features import rasterize
+from scipy import ndimage
 from server_helpers import AUTH
 from shapely.geometry import shape
 
@@ -25,13 +26,16 @@ def site(sample_site_dir):
     return load_site(sample_site_dir)
 
 
-def _reference(site, sid: str, target_height_m: float = 1.7) -> np.ndarray:
+def _reference(
+    site, sid: str, target_height_m: float = 1.7, max_range_m: float = 1000.0
+) -> np.ndarray:
     s = site.sensors[sid]
     return viewshed(
         site.dem,
         s.camera,
         mode="fov",
         target_height_m=target_height_m,
+        max_range_m=max_range_m,
         mount_yaw_deg=s.head.mount_yaw_deg,
     )
 
@@ -156,6 +160,54 @@ def test_coverage_json_matches_viewsheds_and_blind_spots(ro_client, site, masks)
     e, n, _ = site.frame.to_enu(lat, lon, site.frame.h_m)
     assert e == pytest.approx(listed[0]["centroid_enu"][0], abs=0.01)
     assert n == pytest.approx(listed[0]["centroid_enu"][1], abs=0.01)
+
+
+@pytest.mark.parametrize("target_height_m, max_range_m", [(1.7, 1000.0), (0.5, 180.0)])
+def test_blind_spot_outlines_cover_exactly_the_unseen_cells(
+    ro_client, site, masks, target_height_m, max_range_m
+):
+    g = site.dem.grid
+    if (target_height_m, max_range_m) == (1.7, 1000.0):
+        ref = masks
+    else:
+        ref = {sid: _reference(site, sid, target_height_m, max_range_m) for sid in masks}
+    unseen = (np.sum(list(ref.values()), axis=0) == 0) & ~site.dem.nodata
+    r = ro_client.get(
+        "/api/site/coverage.json",
+        params={
+            "target_height_m": target_height_m,
+            "max_range_m": max_range_m,
+            "min_area_m2": 0,
+            "limit": 10_000,
+        },
+        headers=AUTH,
+    )
+    assert r.status_code == 200, r.text
+    body = r.json()
+    listed = body["blind_spots"]
+    assert len(listed) == body["blind_spot_count"] >= 2
+    covered = np.zeros(g.shape, bool)
+    eight = np.ones((3, 3), bool)
+    for b in listed:
+        geom = {"type": "MultiPolygon", "coordinates": b["outline_enu"]}
+        cells = _burn(geom, g)
+        assert not (cells & covered).any()  # the spots are disjoint
+        covered |= cells
+        assert cells.sum() * g.cell_m**2 == pytest.approx(b["area_m2"])
+        # one 8-connected unseen area, with its own centroid and bounding box
+        assert ndimage.label(cells, structure=eight)[1] == 1
+        rows, cols = np.nonzero(cells)
+        x, y = g.from_grid(cols.astype(float), rows.astype(float))
+        assert b["centroid_enu"] == pytest.approx([x.mean(), y.mean()])
+        half = g.cell_m / 2
+        box = [x.min() - half, y.min() - half, x.max() + half, y.max() + half]
+        assert b["bbox_enu"] == pytest.approx(box)
+        multi = shape(geom)
+        assert multi.is_valid and multi.area == pytest.approx(b["area_m2"])
+        for poly in multi.geoms:
+            assert poly.exterior.is_ccw
+    # together they are exactly the cells no sensor sees
+    np.testing.assert_array_equal(covered, unseen)
 
 
 def test_unknown_sensor_is_404(ro_client):

@@ -46,6 +46,7 @@ async function check(resp, what) {
     }
     const err = new Error(`${what}: ${resp.status} ${detail}`);
     err.status = resp.status;
+    err.detail = detail;
     throw err;
   }
   return resp;
@@ -81,8 +82,8 @@ async function sendJSON(method, path, body) {
 }
 
 /** An image as a blob: URL (null on 404). */
-export async function imageURL(path) {
-  const resp = await fetch(path, { headers: headers() });
+export async function imageURL(path, { signal } = {}) {
+  const resp = await fetch(path, { headers: headers(), signal });
   if (resp.status === 404) return null;
   const blob = await (await check(resp, path)).blob();
   return URL.createObjectURL(blob);

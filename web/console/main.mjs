@@ -609,6 +609,8 @@ function buildLayerList() {
       if (box.checked) ui.vis.ensure(name); // the visibility layers load when first shown
       ui.dirty = true;
     });
+    // One parameter group (target, range) above the first of the visibility layers.
+    if (ui.vis.owns(name) && !root.querySelector("#vis-params")) root.append(ui.vis.paramControls());
     root.append(el("div", { class: "layer-row" }, box, el("label", { for: `layer-${name}`, text: layer.get("title") })));
     const controls = ui.vis.controls(name);
     const legend = LEGENDS[name];
@@ -721,7 +723,7 @@ function wireControls() {
   $("#tab-3d").addEventListener("click", () => showTab("3d"));
   document.addEventListener("keydown", (ev) => {
     const tag = (ev.target.tagName || "").toLowerCase();
-    if (tag === "input" && ev.target.type === "text") return;
+    if (tag === "input" && (ev.target.type === "text" || ev.target.type === "number")) return;
     if (tag === "select" || $("#token-dialog").open) return;
     if (ev.key === " ") {
       ev.preventDefault();

@@ -1,0 +1,174 @@
+"""The visibility layers' parameter group (target height, range) in a real browser.
+
+Oracles: ``core.target_heights`` (the target presets), the visibility endpoints asked with
+the same parameters (blind-spot outlines and centroids, viewshed polygons), the server's
+own 422 message for a value it refuses, and the requests the page sent.
+"""
+
+from __future__ import annotations
+
+from urllib.parse import parse_qs, urlsplit
+
+import pytest
+from web_helpers import SHOTS, open_console
+
+from demtrack.core.target_heights import TARGET_HEIGHT_M
+
+pytestmark = pytest.mark.timeout(600)
+
+HEAVY = ("coverage.png", "coverage.json", "viewshed.geojson")
+LAYERS = ("visibility", "viewsheds", "blindspots")
+
+
+def layer_requests(page) -> list[tuple[str, dict[str, str]]]:
+    """``(endpoint, query)`` of every visibility request the page sent, in order."""
+    out = []
+    for url in page.record.requests:
+        parts = urlsplit(url)
+        name = parts.path.rsplit("/", 1)[-1]
+        if name in HEAVY:
+            out.append((parts.path, {k: v[-1] for k, v in parse_qs(parts.query).items()}))
+    return out
+
+
+def wait_ready(page) -> None:
+    page.wait_for_function(
+        """() => { const v = window.demtrack.ui.vis;
+             return ['visibility', 'viewsheds', 'blindspots']
+               .every((n) => v.status[n] === 'ready'); }""",
+        timeout=180_000,
+    )
+
+
+def set_params(page, target: str, height: str | None, range_m: str) -> None:
+    page.locator("#vis-target").select_option(target)
+    if height is not None:
+        page.locator("#vis-height").fill(height)
+    page.locator("#vis-range").fill(range_m)
+    page.locator("#vis-apply").click()
+
+
+def test_target_height_and_range_reach_every_layer_and_the_drawn_outlines(page, server_factory):
+    srv = server_factory("visparams")
+    open_console(page, srv)
+    # The presets are core.target_heights' table; a preset fixes the height field.
+    options = page.evaluate(
+        "[...document.querySelectorAll('#vis-target option')].map((o) => [o.value, o.text])"
+    )
+    assert options == [
+        ["human", f"person {TARGET_HEIGHT_M['human']} m"],
+        ["vehicle", f"car {TARGET_HEIGHT_M['vehicle']} m"],
+        ["custom", "custom"],
+    ]
+    assert page.locator("#vis-height").is_disabled()
+    page.locator("#vis-target").select_option("vehicle")
+    assert page.locator("#vis-height").input_value() == str(TARGET_HEIGHT_M["vehicle"])
+    page.locator("#vis-target").select_option("human")
+    # Show the three layers with the defaults: they say which parameters they used.
+    for name in LAYERS:
+        page.locator(f"#layer-{name}").check()
+    wait_ready(page)
+    for name in LAYERS:
+        used = page.locator(f"[data-used='{name}']").text_content()
+        assert used == "shown: person 1.7 m · range 1000 m", (name, used)
+    assert {q["target_height_m"] for _, q in layer_requests(page)} == {"1.7"}
+
+    # A value the page refuses itself: a message, and nothing is asked.
+    n = len(layer_requests(page))
+    set_params(page, "custom", "-2", "500")
+    status = page.locator("#vis-params-status")
+    assert status.text_content() == "target height: give a number of metres, 0 or more"
+    set_params(page, "custom", "2", "0")
+    assert status.text_content() == "range: give a positive number of metres"
+    assert len(layer_requests(page)) == n
+
+    # A value only the server refuses: its 422 message, on one line; the layers keep theirs.
+    with srv.client() as c:
+        r = c.get("/api/site/coverage.json", params={"target_height_m": 2, "max_range_m": 2e5})
+        assert r.status_code == 422
+        refusal = r.json()["detail"]
+    asked = len(layer_requests(page))
+    set_params(page, "custom", "2", "200000")
+    page.wait_for_function(
+        "document.querySelector('#vis-params').dataset.busy === '0'"
+        " && document.querySelector('#vis-params-status').textContent !== ''",
+        timeout=60_000,
+    )
+    assert status.text_content() == f"server refused: {refusal}"
+    assert "\n" not in refusal and "max_range_m" in refusal
+    assert "error" in (status.get_attribute("class") or "")
+    assert page.locator("[data-used='blindspots']").text_content().endswith("range 1000 m")
+    refused_requests = len(layer_requests(page)) - asked
+    with srv.client() as c:
+        sensors = sorted(s["id"] for s in c.get("/api/sensors").json())
+    assert refused_requests == 2 + len(sensors)  # the image, the summary, each viewshed
+
+    # Two sets in a row: the first one's answers are dropped, the second one is drawn.
+    first = len(layer_requests(page))
+    set_params(page, "vehicle", None, "400")
+    set_params(page, "custom", "3", "600")
+    page.wait_for_function("document.querySelector('#vis-params').dataset.busy === '0'")
+    wait_ready(page)
+    assert status.text_content() == ""
+    want = {"target_height_m": "3", "max_range_m": "600", "mode": "fov"}
+    for name in LAYERS:
+        used = page.evaluate(f"window.demtrack.ui.vis.used.{name}")
+        assert used == {"target": "custom", "target_height_m": 3, "max_range_m": 600}
+        assert page.locator(f"[data-used='{name}']").text_content() == (
+            "shown: custom 3 m · range 600 m"
+        )
+    sent = layer_requests(page)[first:]
+    with srv.client() as c:
+        summary = c.get("/api/site/coverage.json", params=want).json()
+        sheds = {
+            s: c.get(f"/api/sensors/{s}/viewshed.geojson", params={**want, "frame": "enu"}).json()
+            for s in sensors
+        }
+    paths = {p for p, q in sent if {k: q[k] for k in want} == want}
+    assert paths == {
+        "/api/site/coverage.png",
+        "/api/site/coverage.json",
+        *(f"/api/sensors/{s}/viewshed.geojson" for s in sensors),
+    }
+    # Every request carried one of the two sets asked for (the first ones were cut short).
+    assert {(q["target_height_m"], q["max_range_m"]) for _, q in sent} <= {
+        ("1.5", "400"),
+        ("3", "600"),
+    }
+    # The drawn blind spots are the API's outlines (not boxes) and centroids.
+    spots = summary["blind_spots"]
+    assert spots and summary["target_height_m"] == 3 and summary["max_range_m"] == 600
+    drawn = page.evaluate(
+        """() => { const f = window.demtrack.ui.vis.blind.getSource().getFeatures()
+                 .sort((a, b) => a.get('spot') - b.get('spot'));
+             return {
+               outlines: f.filter((x) => x.get('kind') === 'outline')
+                 .map((x) => x.getGeometry().getCoordinates()),
+               centroids: f.filter((x) => x.get('kind') === 'centroid')
+                 .map((x) => x.getGeometry().getCoordinates()),
+               boxes: f.filter((x) => x.get('kind') === 'bbox').length}; }"""
+    )
+    assert drawn["boxes"] == 0
+    assert drawn["outlines"] == [b["outline_enu"] for b in spots]
+    assert drawn["centroids"] == [b["centroid_enu"] for b in spots]
+    assert page.locator("#blind-list > div[data-spot]").count() == len(spots)
+    # ... and the viewsheds are the API's polygons for the same parameters.
+    outlines = page.evaluate(
+        """() => Object.fromEntries(window.demtrack.ui.vis.viewsheds.getSource().getFeatures()
+             .map((f) => [f.get('sensor'), f.getGeometry().getCoordinates()]))"""
+    )
+    assert outlines == {s: sheds[s]["features"][0]["geometry"]["coordinates"] for s in sensors}
+    # The picture: the whole site, coverage and blind-spot outlines.
+    page.locator("#layer-viewsheds").uncheck()
+    page.evaluate(
+        """() => { const b = window.demtrack.ui.site.dem.bounds_enu;
+             window.demtrack.map.view.fit(b, {padding: [10, 10, 10, 10]}); }"""
+    )
+    page.wait_for_timeout(600)
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(SHOTS / "visibility_params.png"))
+    # The browser itself logs each refused request; nothing else went wrong.
+    refused = "the server responded with a status of 422"
+    others = [e for e in page.record.errors if refused not in e]
+    assert others == [] and len(page.record.errors) == refused_requests
+    assert page.record.off_loopback() == []
