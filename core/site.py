@@ -20,6 +20,8 @@ Manifest::
 
 from __future__ import annotations
 
+import functools
+
 import json
 import math
 from collections.abc import Mapping
@@ -68,9 +70,9 @@ class Sensor:
     image_path: Path | None = None
     roll_deg: float = 0.0
 
-    @property
+    @functools.cached_property
     def camera(self) -> Camera:
-        """The camera at the current pan, tilt (and roll)."""
+        """The camera at the current pan, tilt (and roll); built once (both immutable)."""
         if self.roll_deg == 0.0:
             return self.head.camera_at(self.pan_deg, self.tilt_deg)
         return Camera.from_azimuth_tilt_roll(
