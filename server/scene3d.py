@@ -75,6 +75,8 @@ _PALETTE = np.array(
 _SENSOR_COLOURS = [(255, 215, 0), (0, 200, 255), (255, 105, 180), (160, 255, 120)]
 _LIFT_M = 0.4  # draw lines this far above the terrain so the mesh does not swallow them
 _MAX_TRACKS = 40
+#: Segments per drawn piece of a track's polyline (see :meth:`Scene3D._draw_track`).
+_PIECE_SEGMENTS = 256
 _FOLLOW_COLOUR = (255, 230, 0)  # the console's selection colour
 #: Where a camera starts when it begins to follow: this far behind the track (m,
 #: horizontally) and this far above its newest point.
@@ -285,6 +287,11 @@ class _Track:
     points: list[tuple[float, float, float]] = field(default_factory=list)
     det_ids: list[list[int]] = field(default_factory=list)
     t_last: float = 0.0
+    #: The first point index changed since the track was last drawn.
+    changed_from: int = 0
+    #: Polyline pieces drawn (``/tracks/{id}/{k}``) and the ``(colour, thickness)`` used.
+    n_drawn: int = 0
+    style: tuple[tuple[int, int, int], float] | None = None
 
 
 class Scene3D:
@@ -581,6 +588,7 @@ class Scene3D:
             first = len(tr.points)
         pts = body.get("points") or []
         del tr.points[first:], tr.det_ids[first:]
+        tr.changed_from = min(tr.changed_from, first)
         for p in pts:
             tr.points.append((p["e_m"], p["n_m"], p["u_m"]))
             tr.det_ids.append([int(i) for i in p.get("detection_ids", [])])
@@ -723,31 +731,55 @@ class Scene3D:
             self._prune_tracks()
             for tid in sorted(self._dirty_tracks):
                 tr = self._tracks.get(tid)
-                if tr is None or len(tr.points) < 2:
-                    continue
-                p = np.asarray(tr.points) + [0.0, 0.0, _LIFT_M]
-                name = f"/tracks/{tid}"
-                colour = track_colour(tid)
-                if tid == self._follow:
-                    colour, thickness = _FOLLOW_COLOUR, 7.0
-                elif tr.live:
-                    thickness = 4.0
-                else:
-                    c_r, c_g, c_b = (int(0.5 * c + 64) for c in colour)
-                    colour, thickness = (c_r, c_g, c_b), 2.0
-                self._add(
-                    name,
-                    scene.add_line_segments(
-                        name,
-                        polyline_segments(p),
-                        colour,
-                        thickness=thickness,
-                        thickness_units="screen",
-                    ),
-                )
+                if tr is not None:
+                    self._draw_track(tr)
             self._dirty_tracks.clear()
         if self._follow is not None:
             self._update_follow()
+
+    def _track_style(self, tr: _Track) -> tuple[tuple[int, int, int], float]:
+        colour = track_colour(tr.id)
+        if tr.id == self._follow:
+            return _FOLLOW_COLOUR, 7.0
+        if tr.live:
+            return colour, 4.0
+        c_r, c_g, c_b = (int(0.5 * c + 64) for c in colour)
+        return (c_r, c_g, c_b), 2.0
+
+    def _draw_track(self, tr: _Track) -> None:
+        """Redraw the pieces of ``tr``'s polyline its new points touched.
+
+        The polyline is drawn in pieces of :data:`_PIECE_SEGMENTS` segments
+        (``/tracks/{id}/{k}``): a live track changes at its end (new points, a smoothed
+        tail), so an update re-sends one or two pieces rather than the whole history.
+        A new colour or thickness (followed, ended) redraws every piece.
+        """
+        n = len(tr.points)
+        n_pieces = 0 if n < 2 else (n - 2) // _PIECE_SEGMENTS + 1
+        style = self._track_style(tr)
+        # segment j joins points j and j + 1 and lies in piece j // _PIECE_SEGMENTS
+        start = 0 if style != tr.style else max(tr.changed_from - 1, 0) // _PIECE_SEGMENTS
+        for k in range(n_pieces, tr.n_drawn):
+            handle = self.nodes.pop(f"/tracks/{tr.id}/{k}", None)
+            if handle is not None:
+                handle.remove()
+        colour, thickness = style
+        for k in range(start, n_pieces):
+            a = k * _PIECE_SEGMENTS
+            b = min(a + _PIECE_SEGMENTS, n - 1)
+            p = np.asarray(tr.points[a : b + 1]) + [0.0, 0.0, _LIFT_M]
+            name = f"/tracks/{tr.id}/{k}"
+            self._add(
+                name,
+                self.server.scene.add_line_segments(
+                    name,
+                    polyline_segments(p),
+                    colour,
+                    thickness=thickness,
+                    thickness_units="screen",
+                ),
+            )
+        tr.n_drawn, tr.style, tr.changed_from = n_pieces, style, n
 
     def _prune_tracks(self) -> None:
         if len(self._tracks) <= _MAX_TRACKS:
@@ -759,6 +791,7 @@ class Scene3D:
         for tr in ended[: len(self._tracks) - _MAX_TRACKS]:
             del self._tracks[tr.id]
             self._dirty_tracks.discard(tr.id)
-            handle = self.nodes.pop(f"/tracks/{tr.id}", None)
-            if handle is not None:
-                handle.remove()
+            for k in range(tr.n_drawn):
+                handle = self.nodes.pop(f"/tracks/{tr.id}/{k}", None)
+                if handle is not None:
+                    handle.remove()

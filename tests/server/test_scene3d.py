@@ -206,6 +206,62 @@ def track_message(seq: int, points: list[tuple[float, float, float, int]]) -> di
     ).model_dump()
 
 
+def track_segments(scene, tid):
+    """A track's drawn segments, its pieces (``/tracks/{tid}/{k}``) in order."""
+    pieces = sorted(
+        (int(name.rsplit("/", 1)[1]), np.asarray(node.points))
+        for name, node in scene.nodes.items()
+        if name.startswith(f"/tracks/{tid}/")
+    )
+    assert [k for k, _ in pieces] == list(range(len(pieces)))
+    return np.concatenate([p for _, p in pieces]) if pieces else np.zeros((0, 2, 3))
+
+
+def test_long_track_is_drawn_in_pieces_and_updates_redraw_only_its_end(scene, monkeypatch):
+    """A long track's polyline is the same drawn in pieces; an update at the end
+    re-sends only the piece(s) its changed points touch; a restyle re-sends every one."""
+    import demtrack.server.scene3d as s3
+
+    monkeypatch.setattr(s3, "_PIECE_SEGMENTS", 4)
+    walk = [(float(k), 0.5 * k, 1.0 + 0.01 * k, 1000 + k) for k in range(11)]
+    scene.publish([track_message(1, walk)])
+    assert scene.flush()
+    want = s3.polyline_segments(np.array([w[:3] for w in walk]) + [0, 0, s3._LIFT_M])
+    tid = 7
+    np.testing.assert_allclose(track_segments(scene, tid), want)
+    assert len([n for n in scene.nodes if n.startswith(f"/tracks/{tid}/")]) == 3  # 4 + 4 + 2
+    before = {n: h for n, h in scene.nodes.items() if n.startswith(f"/tracks/{tid}/")}
+    # revise the last two points and add one: only piece 2 (segments 8..) changes
+    more = [(20.0, 9.0, 1.5, 2000), (21.0, 9.5, 1.5, 2001), (22.0, 10.0, 1.5, 2002)]
+    upd = track_message(2, more)
+    upd["track"]["first_index"] = 9
+    scene.publish([upd])
+    assert scene.flush()
+    pts = [w[:3] for w in walk[:9]] + [m[:3] for m in more]
+    want = s3.polyline_segments(np.array(pts) + [0, 0, s3._LIFT_M])
+    np.testing.assert_allclose(track_segments(scene, tid), want)
+    after = {n: h for n, h in scene.nodes.items() if n.startswith(f"/tracks/{tid}/")}
+    assert after[f"/tracks/{tid}/0"] is before[f"/tracks/{tid}/0"]
+    assert after[f"/tracks/{tid}/1"] is before[f"/tracks/{tid}/1"]
+    assert after[f"/tracks/{tid}/2"] is not before[f"/tracks/{tid}/2"]
+    # a change inside piece 1 (point 6) redraws pieces 1 and 2 (segment 5 is in piece 1)
+    upd = track_message(3, [(6.0, 7.0, 1.0, 3000)] + [w for w in walk[7:9]] + more)
+    upd["track"]["first_index"] = 6
+    scene.publish([upd])
+    assert scene.flush()
+    again = {n: h for n, h in scene.nodes.items() if n.startswith(f"/tracks/{tid}/")}
+    assert again[f"/tracks/{tid}/0"] is before[f"/tracks/{tid}/0"]
+    assert again[f"/tracks/{tid}/1"] is not before[f"/tracks/{tid}/1"]
+    # the track ends: every piece gets the ended style
+    end = track_message(4, [])
+    end["track"]["live"] = False
+    end["track"]["first_index"] = 12
+    scene.publish([end])
+    assert scene.flush()
+    pieces = [h for n, h in scene.nodes.items() if n.startswith(f"/tracks/{tid}/")]
+    assert len(pieces) == 3 and all(h.thickness == 2.0 for h in pieces)
+
+
 def test_live_rays_hits_and_tracks(scene):
     # Two rays, each meeting the terrain twice; the track passes by the second hit of the
     # first ray and the first hit of the second: those are the tracker's choices.
@@ -217,13 +273,13 @@ def test_live_rays_hits_and_tracks(scene):
     )
     scene.publish([track_message(3, [(19.8, 0.1, 3.0, 101), (11.2, 1.0, 15.0, 102)])])
     assert scene.flush()
-    assert {"/rays/lines", "/rays/hits", "/rays/chosen", "/tracks/7"} <= set(scene.nodes)
+    assert {"/rays/lines", "/rays/hits", "/rays/chosen", "/tracks/7/0"} <= set(scene.nodes)
     chosen = np.asarray(scene.nodes["/rays/chosen"].points)
     np.testing.assert_allclose(chosen, [[20.0, 0.0, 3.0], [11.0, 1.0, 15.0]])
     assert len(scene.nodes["/rays/hits"].points) == 4
     lines = np.asarray(scene.nodes["/rays/lines"].points)
     np.testing.assert_allclose(lines[0], [[0.0, 0.0, 30.0], [20.0, 0.0, 3.0]])  # to the far hit
-    track = np.asarray(scene.nodes["/tracks/7"].points)
+    track = track_segments(scene, 7)
     assert track.shape == (1, 2, 3)
     # Only the newest max_rays (5) rays are kept.
     scene.publish([fix_message(10 + k, 200 + k, [hit(k, 0.0, 1.0)]) for k in range(8)])
@@ -234,7 +290,7 @@ def test_live_rays_hits_and_tracks(scene):
     upd["track"]["first_index"] = 1
     scene.publish([upd])
     assert scene.flush()
-    track = np.asarray(scene.nodes["/tracks/7"].points)
+    track = track_segments(scene, 7)
     np.testing.assert_allclose(
         track[:, :, :2].reshape(-1, 2)[[0, 1, 3]], [[19.8, 0.1], [5, 5], [6, 5]]
     )
@@ -364,7 +420,7 @@ def test_follow_moves_every_client_camera_to_the_track(scene):
         np.testing.assert_allclose(state["look_at_enu"], head)
         np.testing.assert_allclose(state["clients"][0]["look_at_enu"], head)
         # The followed polyline is highlighted; a marker sits at its head.
-        line = scene.nodes["/tracks/41"]
+        line = scene.nodes["/tracks/41/0"]
         assert np.asarray(line.colors).reshape(-1, 3)[0].tolist() == [255, 230, 0]
         assert line.thickness == 7.0
         np.testing.assert_allclose(scene.nodes["/follow/head"].position, head)
@@ -397,7 +453,7 @@ def test_follow_moves_every_client_camera_to_the_track(scene):
         scene.follow(None)
         assert scene.flush()
         assert "/follow/head" not in scene.nodes and scene.follow_state()["track_id"] is None
-        line = scene.nodes["/tracks/41"]
+        line = scene.nodes["/tracks/41/0"]
         assert tuple(np.asarray(line.colors).reshape(-1, 3)[0]) == track_colour(41)
         assert line.thickness == 4.0
         np.testing.assert_allclose(client.camera.look_at, head2, atol=1e-9)
