@@ -21,7 +21,6 @@ Manifest::
 from __future__ import annotations
 
 import functools
-
 import json
 import math
 from collections.abc import Mapping
