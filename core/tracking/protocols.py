@@ -305,10 +305,14 @@ class Reacquirer(Protocol):
         xy: np.ndarray,
         cov_xy: np.ndarray,
         rng: np.random.Generator,
+        v_xy: np.ndarray | None = None,
+        cov_v: np.ndarray | None = None,
     ) -> float:
         """Density (1/m^2) at ``xy`` (2,), known to ``cov_xy``, of the lost track at ``t_s``.
 
         ``state`` is its (possibly coasted) state; ``last_t_s``, ``last_xy`` (2,) the
-        time and position of its last estimate.
+        time and position of its last estimate. Given the new track's velocity ``v_xy``
+        (2,) known to ``cov_v`` (2, 2), and where the prediction has a velocity, the
+        density is joint over position and velocity (1/m^2 times 1/(m/s)^2).
         """
         ...

@@ -29,7 +29,14 @@ from .particle import ParticleState
 from .protocols import Filter
 from .roadfollow import follow_road
 
-__all__ = ["MotionReacquirer", "RoadFollowingReacquirer", "gaussian_density", "mean_velocity"]
+__all__ = [
+    "MotionReacquirer",
+    "RoadFollowingReacquirer",
+    "gaussian_density",
+    "mean_velocity",
+    "velocity_gaussian",
+    "velocity_prior_density",
+]
 
 
 def gaussian_density(nu_xy: np.ndarray, cov_xy: np.ndarray) -> float:
@@ -54,6 +61,46 @@ def mean_velocity(state: object) -> np.ndarray | None:
     return None
 
 
+def velocity_gaussian(state: object) -> tuple[np.ndarray, np.ndarray] | None:
+    """Horizontal velocity mean (2,) and covariance (2, 2) (m/s, (m/s)^2) of a state.
+
+    Gaussian states: their velocity block; constant-velocity particles: the weighted
+    mean and covariance. None for states without a planar velocity.
+    """
+    if isinstance(state, GaussianState):
+        return state.x[2:4].copy(), state.P[2:4, 2:4].copy()
+    if isinstance(state, ParticleState) and isinstance(state.particles, np.ndarray):
+        if state.particles.ndim == 2 and state.particles.shape[1] == 4:
+            w = state.weights
+            v = state.particles[:, 2:4]
+            mean = w @ v
+            d = v - mean
+            return mean, (w[:, None] * d).T @ d
+    return None
+
+
+def velocity_prior_density(v_xy: np.ndarray, cov_v: np.ndarray, speed_sigma_m_s: float) -> float:
+    """Density (1/(m/s)^2) a new object's velocity prior gives a velocity estimate.
+
+    The prior is the one a new track starts from: zero mean, ``speed_sigma_m_s`` per
+    axis; the estimate ``v_xy`` (2,) is known to ``cov_v`` (2, 2).
+    """
+    return gaussian_density(
+        np.asarray(v_xy, dtype=np.float64), cov_v + speed_sigma_m_s**2 * np.eye(2)
+    )
+
+
+def _velocity_factor(
+    pred: tuple[np.ndarray, np.ndarray] | None,
+    v_xy: np.ndarray | None,
+    cov_v: np.ndarray | None,
+) -> float:
+    """Predicted velocity's density at the new track's (1 when either is unknown)."""
+    if pred is None or v_xy is None or cov_v is None:
+        return 1.0
+    return gaussian_density(np.asarray(v_xy, dtype=np.float64) - pred[0], pred[1] + cov_v)
+
+
 @dataclass(frozen=True)
 class MotionReacquirer:
     """The filter's own prediction over the absence."""
@@ -68,13 +115,20 @@ class MotionReacquirer:
         xy: np.ndarray,
         cov_xy: np.ndarray,
         rng: np.random.Generator,
+        v_xy: np.ndarray | None = None,
+        cov_v: np.ndarray | None = None,
     ) -> float:
         """Predictive density (1/m^2) at ``xy`` (2,) known to ``cov_xy`` (2, 2) at ``t_s``.
 
         ``state`` is the lost track's (possibly coasted) state; ``last_t_s`` and
-        ``last_xy`` (2,) the time and position of its last estimate.
+        ``last_xy`` (2,) the time and position of its last estimate. With the new
+        track's velocity ``v_xy`` (2,) known to ``cov_v`` (2, 2), the density is joint
+        (times that of the predicted velocity there, 1/(m/s)^2) where the predicted
+        state has a velocity (:func:`velocity_gaussian`).
         """
-        return float(flt.density(flt.predict(state, t_s, rng), xy, cov_xy))
+        pred = flt.predict(state, t_s, rng)
+        plain = float(flt.density(pred, xy, cov_xy))
+        return plain * _velocity_factor(velocity_gaussian(pred), v_xy, cov_v)
 
 
 @dataclass(frozen=True)
@@ -140,22 +194,34 @@ class RoadFollowingReacquirer:
         xy: np.ndarray,
         cov_xy: np.ndarray,
         rng: np.random.Generator,
+        v_xy: np.ndarray | None = None,
+        cov_v: np.ndarray | None = None,
     ) -> float:
         """Mixture of the along-road and the plain predictive densities (1/m^2).
 
         States without a planar velocity (road particles already follow the roads, raw
-        states) get the plain prediction only.
+        states) get the plain prediction only. With the new track's velocity ``v_xy``
+        known to ``cov_v`` each mode is joint over position and velocity (see
+        :meth:`MotionReacquirer.density`); along the road the predicted velocity is the
+        last speed along the road's direction at the predicted point, with the plain
+        prediction's velocity covariance.
         """
         pred = flt.predict(state, t_s, rng)
-        plain = float(flt.density(pred, xy, cov_xy))
+        pred_v = velocity_gaussian(pred)
+        plain = float(flt.density(pred, xy, cov_xy)) * _velocity_factor(pred_v, v_xy, cov_v)
         v = mean_velocity(state)
         if v is None:
             return plain
-        road = self.predict(
-            np.asarray(last_xy, dtype=np.float64)[:2], v, t_s - last_t_s, flt.gaussian(pred)[1]
-        )
+        dt = t_s - last_t_s
+        road = self.predict(np.asarray(last_xy, dtype=np.float64)[:2], v, dt, flt.gaussian(pred)[1])
         if road is None:
             return plain
         mean, cov = road
         on_road = gaussian_density(np.asarray(xy, dtype=np.float64) - mean, cov + cov_xy)
+        if pred_v is not None and v_xy is not None:
+            times = np.array([dt, dt + 0.5])
+            path = follow_road(self.lines, np.asarray(last_xy)[:2], v, times, self.snap_m)
+            if path is not None:
+                along_v = (path[1] - path[0]) / 0.5
+                on_road *= _velocity_factor((along_v, pred_v[1]), v_xy, cov_v)
         return (1.0 - self.p_off_road) * on_road + self.p_off_road * plain
