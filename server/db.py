@@ -2,7 +2,7 @@
 
 One file (WAL journal, ``synchronous=FULL``), a versioned schema with ordered migrations,
 one write connection and one read connection, each behind its own lock (the server calls
-in from worker threads). A detection batch is durable when :meth:`Store.insert_batch`
+in from worker threads). A detection batch is durable when :meth:`Store.insert_batches`
 returns: its transaction has committed and, with ``synchronous=FULL``, the WAL is synced.
 Derived rows (fixes, tracks, events, activity) commit with ``synchronous=NORMAL``: no sync
 of their own, so a batch costs one sync, not two. A killed process loses none of them (the
@@ -258,38 +258,63 @@ class Store:
         A ``batch_key`` seen before inserts nothing and returns the first report (so a
         client may safely resend a batch whose acknowledgement it lost).
         """
+        return self.insert_batches([(lambda: (detections, report), batch_key)])[0]
 
-        def run(c: sqlite3.Connection) -> StoredBatch:
-            if batch_key is not None:
-                row = c.execute(
-                    "SELECT id, report FROM batches WHERE batch_key = ?", (batch_key,)
-                ).fetchone()
-                if row is not None:
-                    ids = [
-                        r[0]
-                        for r in c.execute(
-                            "SELECT id FROM detections WHERE batch_id = ? ORDER BY id", (row[0],)
+    def insert_batches(
+        self,
+        batches: Sequence[
+            tuple[Callable[[], tuple[Sequence[Detection], dict[str, Any]]], str | None]
+        ],
+    ) -> list[StoredBatch]:
+        """Insert several batches in one committed transaction (one WAL sync): group commit.
+
+        Each entry is ``(make, batch_key)``; in order, a key seen before (in the file or
+        earlier in this call) inserts nothing and gives the first report back, otherwise
+        ``make()`` is called - inside the transaction, so it may depend on the batches
+        before it - for the batch's accepted detections and report. All or none commit.
+        """
+
+        def run(c: sqlite3.Connection) -> list[StoredBatch]:
+            out = []
+            for make, batch_key in batches:
+                if batch_key is not None:
+                    row = c.execute(
+                        "SELECT id, report FROM batches WHERE batch_key = ?", (batch_key,)
+                    ).fetchone()
+                    if row is not None:
+                        ids = [
+                            r[0]
+                            for r in c.execute(
+                                "SELECT id FROM detections WHERE batch_id = ? ORDER BY id",
+                                (row[0],),
+                            )
+                        ]
+                        out.append(
+                            StoredBatch(row[0], tuple(ids), json.loads(row[1]), duplicate=True)
                         )
-                    ]
-                    return StoredBatch(row[0], tuple(ids), json.loads(row[1]), duplicate=True)
-            cur = c.execute(
-                "INSERT INTO batches (batch_key, n_records, n_accepted, report) VALUES (?,?,?,?)",
-                (batch_key, report["n_records"], report["accepted"], dumps_json(report)),
-            )
-            batch_id = int(cur.lastrowid or 0)
-            # Ids are given explicitly (the next ones, in record order: the write lock and
-            # BEGIN IMMEDIATE make this the only writer) so one executemany inserts them.
-            first = _next_id(c, "SELECT MAX(id) FROM detections")
-            ids = tuple(range(first, first + len(detections)))
-            c.executemany(
-                "INSERT INTO detections (id, batch_id, t_s, sensor, u_min, v_min, u_max, v_max,"
-                " cls, score, local_id) VALUES (?,?,?,?,?,?,?,?,?,?,?)",
-                [
-                    (i, batch_id, d.t_s, d.sensor, *d.bbox, d.cls, d.score, d.local_id)
-                    for i, d in zip(ids, detections, strict=True)
-                ],
-            )
-            return StoredBatch(batch_id, ids, report)
+                        continue
+                detections, report = make()
+                cur = c.execute(
+                    "INSERT INTO batches (batch_key, n_records, n_accepted, report)"
+                    " VALUES (?,?,?,?)",
+                    (batch_key, report["n_records"], report["accepted"], dumps_json(report)),
+                )
+                batch_id = int(cur.lastrowid or 0)
+                # Ids are given explicitly (the next ones, in record order: the write lock
+                # and BEGIN IMMEDIATE make this the only writer) so one executemany inserts
+                # them.
+                first = _next_id(c, "SELECT MAX(id) FROM detections")
+                ids = tuple(range(first, first + len(detections)))
+                c.executemany(
+                    "INSERT INTO detections (id, batch_id, t_s, sensor, u_min, v_min, u_max,"
+                    " v_max, cls, score, local_id) VALUES (?,?,?,?,?,?,?,?,?,?,?)",
+                    [
+                        (i, batch_id, d.t_s, d.sensor, *d.bbox, d.cls, d.score, d.local_id)
+                        for i, d in zip(ids, detections, strict=True)
+                    ],
+                )
+                out.append(StoredBatch(batch_id, ids, report))
+            return out
 
         return self._tx(run)
 

@@ -68,6 +68,13 @@ class HitBody(_Model):
     lon_deg: float
     h_m: float
     sigma_m: float = Field(description="1-sigma horizontal uncertainty (m)")
+    cov_en_m2: list[list[float]] | None = Field(
+        default=None,
+        min_length=2,
+        max_length=2,
+        description="Horizontal covariance [[ee, en], [ne, nn]] (m^2): elongated along the"
+        " ray on flat ground; terrain hits only (the tracker's measurement noise)",
+    )
 
 
 class FixBody(_Model):

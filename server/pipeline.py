@@ -2,7 +2,10 @@
 
 One :class:`Pipeline` per server, called from worker threads; a lock serialises batches
 so detection ids, the tracker's input order and the stream's sequence numbers all follow
-arrival order. The tracker's input is always the fix *as stored* (rebuilt from its JSON),
+arrival order. Batches that arrive while the lock is held are committed together (one
+transaction, one WAL sync) and processed as one by whichever of them gets the lock next:
+group commit, so several cameras posting at once share the fixed costs of a batch.
+The tracker's input is always the fix *as stored* (rebuilt from its JSON),
 so replaying the stored fixes at start-up rebuilds exactly the tracker state the live
 run had: tracks after a restart are those the uninterrupted run would have made.
 
@@ -36,6 +39,7 @@ import logging
 import math
 import threading
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -63,16 +67,24 @@ _MAX_ISSUES = 20
 _REPLAY_DROP_EVERY = 4096
 
 
-def _hit(p: np.ndarray, sigma: float, geo: tuple[float, float, float]) -> dict[str, float]:
-    return {
-        "e_m": float(p[0]),
-        "n_m": float(p[1]),
-        "u_m": float(p[2]),
+def _hit(
+    p: list[float],
+    sigma: float,
+    geo: list[float],
+    cov: list[list[float]] | None = None,
+) -> dict[str, Any]:
+    hit: dict[str, Any] = {
+        "e_m": p[0],
+        "n_m": p[1],
+        "u_m": p[2],
         "lat_deg": geo[0],
         "lon_deg": geo[1],
         "h_m": geo[2],
-        "sigma_m": float(sigma),
+        "sigma_m": sigma,
     }
+    if cov is not None:
+        hit["cov_en_m2"] = cov
+    return hit
 
 
 def pipeline_options(settings: Any) -> dict[str, Any]:
@@ -123,7 +135,10 @@ def fix_from_body(body: dict[str, Any]) -> Fix:
     hits_enu = [[h["e_m"], h["n_m"], h["u_m"]] for h in hits]
     sigma = [h["sigma_m"] for h in hits]
     road_enu = None if road is None else [road["e_m"], road["n_m"], road["u_m"]]
-    fast = _trusted_fix(body, hits_enu, sigma, road_enu)
+    covs = [h.get("cov_en_m2") for h in hits]
+    # bodies stored before covariances were kept have none: the tracker uses sigma_m
+    cov = covs if covs and all(c is not None for c in covs) else None
+    fast = _trusted_fix(body, hits_enu, sigma, road_enu, cov)
     if fast is not None:
         return fast
     return Fix(
@@ -137,14 +152,15 @@ def fix_from_body(body: dict[str, Any]) -> Fix:
         hit_sigma_m=sigma,
         road_hit_enu=road_enu,
         score=body.get("score"),
+        hit_cov_en_m2=cov,
     )
 
 
 def _stored_fix(det_id: int, d: Detection, fix: Fix) -> Fix:
     """What :func:`fix_from_body` makes of the body :meth:`Pipeline._fix_bodies` stores.
 
-    The body holds the fix's own floats (``tolist`` and JSON keep every bit) and no hit
-    covariances; the direction is normalised again, as the constructor does.
+    The body holds the fix's own floats (``tolist`` and JSON keep every bit); the
+    direction is normalised again, as the constructor does.
     """
     direction = np.array(fix.direction_enu, dtype=np.float64)
     direction /= float(np.linalg.norm(direction))
@@ -160,7 +176,7 @@ def _stored_fix(det_id: int, d: Detection, fix: Fix) -> Fix:
         fix.hit_sigma_m,
         fix.road_hit_enu,
         d.score,
-        None,
+        fix.hit_cov_en_m2,
     )
 
 
@@ -169,6 +185,7 @@ def _trusted_fix(
     hits_enu: list[list[float]],
     sigma: list[float],
     road_enu: list[float] | None,
+    cov: list[Any] | None = None,
 ) -> Fix | None:
     """:func:`fix_from_body`'s fix without per-field checks, or None if anything is off."""
     try:
@@ -182,6 +199,7 @@ def _trusted_fix(
                 *(road_enu or ()),
                 *sigma,
                 *(v for h in hits_enu for v in h),
+                *(v for c in cov or () for row in c for v in row),
                 0.0 if score is None else float(score),
             ],
             dtype=np.float64,
@@ -190,9 +208,11 @@ def _trusted_fix(
         return None
     n = len(sigma)
     n_road = 0 if road_enu is None else 3
+    n_cov = 0 if cov is None else 4 * n
     if (
-        flat.shape != (8 + n_road + 4 * n,)
+        flat.shape != (8 + n_road + 4 * n + n_cov,)
         or any(len(h) != 3 for h in hits_enu)
+        or (cov is not None and any(len(c) != 2 or any(len(r) != 2 for r in c) for c in cov))
         or body.get("cls") not in CLASSES
         or not isinstance(body.get("sensor"), str)
         or not np.isfinite(flat).all()
@@ -204,10 +224,16 @@ def _trusted_fix(
     road = flat[7 : 7 + n_road].copy() if road_enu is not None else None
     sig = flat[7 + n_road : 7 + n_road + n].copy()
     hits = flat[7 + n_road + n : 7 + n_road + 4 * n].reshape(n, 3).copy()
+    covs = None
+    if cov is not None:
+        covs = flat[7 + n_road + 4 * n : 7 + n_road + 4 * n + n_cov].reshape(n, 2, 2).copy()
+        det = covs[:, 0, 0] * covs[:, 1, 1] - covs[:, 0, 1] * covs[:, 1, 0]
+        if np.any(covs[:, 0, 1] != covs[:, 1, 0]) or np.any(covs[:, 0, 0] <= 0) or np.any(det <= 0):
+            return None  # the constructor symmetrises or refuses: let it
     if norm == 0.0 or np.any(sig <= 0):
         return None
     direction /= norm
-    for a in (origin, direction, road, sig, hits):
+    for a in (origin, direction, road, sig, hits, covs):
         if a is not None:
             a.setflags(write=False)
     return Fix._trusted(
@@ -221,8 +247,18 @@ def _trusted_fix(
         sig,
         road,
         None if score is None else score,
-        None,
+        covs,
     )
+
+
+@dataclass(eq=False)
+class _Request:
+    """One :meth:`Pipeline.ingest` call waiting for its group's commit."""
+
+    records: Sequence[Any]
+    batch_key: str | None
+    ack: dict[str, Any] | None = None
+    error: BaseException | None = None
 
 
 class Pipeline:
@@ -277,6 +313,11 @@ class Pipeline:
         self.event_params = events
         self.live_events: LiveEvents | None = None
         self._lock = threading.Lock()
+        self._waiting_lock = threading.Lock()
+        self._waiting: list[_Request] = []
+        #: Ingest transactions committed and the batches they held (group commit).
+        self.n_commits = 0
+        self.n_batches = 0
         self._last_t: dict[str, float] = {}
         self._n_det: dict[str, int] = {}
         self._seen: dict[int, tuple[int, bytes, bool]] = {}
@@ -378,26 +419,73 @@ class Pipeline:
 
         Returns the acknowledgement (the batch is committed when this returns): counts
         ``accepted`` / ``skipped`` by reason, the first issues, the new detection ids.
+
+        Group commit: batches that arrive while another is being handled (several
+        cameras posting at once) wait together; the next one to get the lock commits all
+        of them in one transaction (one WAL sync) and processes them as one, in arrival
+        order - each keeps its own batch row, acknowledgement and ``ingest`` message.
         """
+        req = _Request(records, batch_key)
+        with self._waiting_lock:
+            self._waiting.append(req)
         with self._lock:
-            dets, ack = self._validate(records)
-            stored = self.store.insert_batch(dets, ack, batch_key)
-            ack = {
-                **stored.report,
-                "batch_id": stored.batch_id,
-                "detection_ids": list(stored.detection_ids),
-                "duplicate": stored.duplicate,
+            if req.ack is None and req.error is None:
+                with self._waiting_lock:
+                    group, self._waiting = self._waiting, []
+                self._ingest_group(group)
+        if req.error is not None:
+            raise req.error
+        assert req.ack is not None
+        return req.ack
+
+    def _ingest_group(self, group: list[_Request]) -> None:
+        """Commit ``group``'s batches in one transaction, then process them (lock held)."""
+        last_t, n_det = dict(self._last_t), dict(self._n_det)
+        made: dict[int, tuple[list[Detection], dict[str, Any]]] = {}
+
+        def maker(k: int, req: _Request) -> Callable[[], tuple[list[Detection], dict[str, Any]]]:
+            def make() -> tuple[list[Detection], dict[str, Any]]:
+                dets, ack = self._validate(req.records)  # after the batches before it
+                for d in dets:
+                    self._last_t[d.sensor] = max(d.t_s, self._last_t.get(d.sensor, d.t_s))
+                    self._n_det[d.sensor] = self._n_det.get(d.sensor, 0) + 1
+                made[k] = (dets, ack)
+                return dets, ack
+
+            return make
+
+        try:
+            stored = self.store.insert_batches(
+                [(maker(k, req), req.batch_key) for k, req in enumerate(group)]
+            )
+        except BaseException as exc:  # nothing committed: every batch of the group fails
+            self._last_t, self._n_det = last_t, n_det
+            for req in group:
+                req.error = exc
+            return
+        self.n_commits += 1
+        self.n_batches += len(group)
+        pending: list[tuple[int, Detection]] = []
+        acks: list[tuple[dict[str, Any], float | None]] = []
+        for k, (req, sb) in enumerate(zip(group, stored, strict=True)):
+            req.ack = {
+                **sb.report,
+                "batch_id": sb.batch_id,
+                "detection_ids": list(sb.detection_ids),
+                "duplicate": sb.duplicate,
             }
-            if stored.duplicate:
-                return ack
-            for d in dets:
-                self._last_t[d.sensor] = max(d.t_s, self._last_t.get(d.sensor, d.t_s))
-                self._n_det[d.sensor] = self._n_det.get(d.sensor, 0) + 1
-            try:
-                self._process(list(zip(stored.detection_ids, dets, strict=True)), ack=ack)
-            except Exception:  # the batch is durable; start-up replays what failed here
-                log.exception("processing batch %s failed after commit", stored.batch_id)
-            return ack
+            if sb.duplicate:
+                continue
+            dets = made[k][0]
+            pending += zip(sb.detection_ids, dets, strict=True)
+            acks.append((req.ack, max((d.t_s for d in dets), default=None)))
+        if not acks:
+            return
+        try:
+            self._process(pending, acks=acks)
+        except Exception:  # the batches are durable; start-up replays what failed here
+            ids = ", ".join(str(a["batch_id"]) for a, _ in acks)
+            log.exception("processing batch(es) %s failed after commit", ids)
 
     # ------------------------------------------------------------ reorder buffer
     def _admit(self, body: dict[str, Any]) -> bool:
@@ -459,11 +547,17 @@ class Pipeline:
         self,
         pending: list[tuple[int, Detection]],
         *,
-        ack: dict[str, Any] | None = None,
+        acks: Sequence[tuple[dict[str, Any], float | None]] = (),
     ) -> None:
+        """Geolocate, track, detect events, store and publish ``pending`` detections.
+
+        ``acks``: each ingested batch's acknowledgement and newest detection time, for
+        its ``ingest`` message.
+        """
         dets = [d for _, d in pending]
         fixes, _ = build_fixes(self.site, dets)
         bodies = self._fix_bodies(pending, fixes)
+        fixed = {det_id for (det_id, _), body in zip(pending, bodies, strict=True) if body}
         rows: list[tuple[int, float, str, str, str, dict[str, Any]]] = []
         events: list[tuple[str, dict[str, Any]]] = []
         for (det_id, d), body in zip(pending, bodies, strict=True):
@@ -511,12 +605,12 @@ class Pipeline:
                     },
                 )
             )
-        if ack is not None:
+        for ack, t in acks:
+            n_fixes = sum(1 for i in ack["detection_ids"] if i in fixed)
             text = (
                 f"batch {ack['batch_id']}: {ack['accepted']} of {ack['n_records']} detections"
-                f" accepted, {len(fixes)} fixes"
+                f" accepted, {n_fixes} fixes"
             )
-            t = max((d.t_s for d in dets), default=None)
             events.append(("event", {"type": "event", "kind": "ingest", "t_s": t, "text": text}))
         seqs = self.store.write_derived(rows, track_rows, events, activity=activity)
         self.publish([{**p, "seq": s} for (_, p), s in zip(events, seqs, strict=True)])
@@ -560,8 +654,11 @@ class Pipeline:
                 out.append(None)
                 continue
             hits = []
-            for p, sigma in zip(fix.hits_enu.tolist(), fix.hit_sigma_m.tolist(), strict=True):
-                hits.append(_hit(p, sigma, geo[k]))
+            covs = [None] * fix.n_hits if fix.hit_cov_en_m2 is None else fix.hit_cov_en_m2.tolist()
+            for p, sigma, cov in zip(
+                fix.hits_enu.tolist(), fix.hit_sigma_m.tolist(), covs, strict=True
+            ):
+                hits.append(_hit(p, sigma, geo[k], cov))
                 k += 1
             road = None
             if fix.road_hit_enu is not None:
@@ -589,41 +686,63 @@ class Pipeline:
         return out
 
     # ------------------------------------------------------------------ tracks
-    def _point_dicts(self, track: Track) -> list[dict[str, Any]]:
-        """JSON points of a track; geodetic conversion only for points that changed."""
-        p = track.p_enu
-        cached = self._points.get(track.id)
-        same = 0
-        if cached is not None:
-            old_p, old_pts, old_js = cached
-            m = min(len(old_p), len(p))
-            diff = np.flatnonzero(np.any(old_p[:m] != p[:m], axis=1))
-            same = int(diff[0]) if len(diff) else m
-            same = min(same, len(old_pts))
-            pts, js = old_pts[:same], old_js[:same]
-        else:
-            pts, js = [], []
-        new = track.points[same:]
-        if new:
-            q = p[same:]
-            lat, lon, h = (np.atleast_1d(a) for a in self.site.frame.to_geodetic(*q.T))
-            for k, tp in enumerate(new):
+    def _refresh_points(self, tracks: Sequence[Track]) -> None:
+        """Bring the cached JSON points of ``tracks`` up to date.
+
+        Only points that changed since the last call are converted and encoded (a track
+        changes at its end), and the new points of all ``tracks`` go through one geodetic
+        conversion: per call, not per track (each costs a pyproj round trip).
+        """
+        todo = []
+        for track in tracks:
+            p = track.p_enu
+            cached = self._points.get(track.id)
+            same = 0
+            if cached is not None:
+                old_p, old_pts, old_js = cached
+                m = min(len(old_p), len(p))
+                diff = np.flatnonzero(np.any(old_p[:m] != p[:m], axis=1))
+                same = int(diff[0]) if len(diff) else m
+                same = min(same, len(old_pts))
+                if same == len(p) == len(old_pts):
+                    continue  # nothing changed
+                pts, js = old_pts[:same], old_js[:same]
+            else:
+                pts, js = [], []
+            todo.append((track, same, pts, js))
+        if not todo:
+            return
+        q = np.concatenate([t.p_enu[same:] for t, same, _, _ in todo])
+        lat, lon, h = (
+            np.atleast_1d(a).tolist()
+            for a in self.site.frame.to_geodetic(q[:, 0], q[:, 1], q[:, 2])
+        )
+        rows = q.tolist()
+        k = 0
+        for track, same, pts, js in todo:
+            for tp in track.points[same:]:
+                e, n, u = rows[k]
                 pts.append(
                     {
                         "t_s": tp.t_s,
-                        "e_m": float(q[k, 0]),
-                        "n_m": float(q[k, 1]),
-                        "u_m": float(q[k, 2]),
-                        "lat_deg": float(lat[k]),
-                        "lon_deg": float(lon[k]),
-                        "h_m": float(h[k]),
+                        "e_m": e,
+                        "n_m": n,
+                        "u_m": u,
+                        "lat_deg": lat[k],
+                        "lon_deg": lon[k],
+                        "h_m": h[k],
                         "sensors": list(tp.sensors),
                         "detection_ids": list(tp.fix_indices),
                     }
                 )
                 js.append(dumps_json(pts[-1]))
-        self._points[track.id] = (p, pts, js)
-        return pts
+                k += 1
+            self._points[track.id] = (track.p_enu, pts, js)
+
+    def _point_dicts(self, track: Track) -> list[dict[str, Any]]:
+        """JSON points of a track; geodetic conversion only for points that changed."""
+        self._refresh_points([track])
+        return self._points[track.id][1]
 
     def _body_json(self, body: dict[str, Any]) -> str:
         """``body`` (a whole :meth:`track_body`) as JSON, from its points' cached encodings.
@@ -661,6 +780,7 @@ class Pipeline:
         self._live_ids = live_ids
         lag = int(getattr(self.tracker.config, "smoothing_lag", 0))
         rows, events = [], []
+        changed = []
         for track in tracks:
             if not track.points:
                 continue
@@ -671,6 +791,9 @@ class Pipeline:
             if prev == sig and not force:
                 continue
             self._seen[track.id] = sig
+            changed.append((track, live, p, prev))
+        self._refresh_points([t for t, _, _, _ in changed])
+        for track, live, p, prev in changed:
             full = self.track_body(track, live)
             rows.append(
                 {
