@@ -95,28 +95,41 @@ def dense_scene(
 ) -> DenseScene:
     """The scene :func:`~demtrack.server.replay.scenario_stream` replays from time 0.
 
-    Copy ``k`` of a scenario has noise seed ``k`` and is shifted by
-    ``round(k * period / copies * rate) / rate + loop * period``, ``period`` = the last
-    frame time plus ``gap_s`` (default: the replay's loop gap), as the replay does.
+    Copy ``k`` of a scenario has noise seed ``k``; loop periods and start offsets come
+    from :func:`~demtrack.server.replay_schedule.replay_schedule` (``gap_s`` default:
+    the replay's loop gap), as the replay does: copy ``k`` of scenario ``j``, loop ``l``
+    is shifted by ``offsets[j][k] + l * periods[j]``.
     """
     from demtrack.core.tracking import TruthPath
     from demtrack.samplesite.scenarios import ScenarioParams, make_scenario
     from demtrack.server.replay import LOOP_GAP_S
+    from demtrack.server.replay_schedule import replay_schedule
 
     gap = LOOP_GAP_S if gap_s is None else float(gap_s)
     dets: list[Detection] = []
     truths: list[TruthPath] = []
     labels: dict[int, str] = {}
+    played = []
+    rate = 10.0
     for name in names:
+        made = []
         for k in range(copies):
             params = ScenarioParams(seed=k, **({} if rate_hz is None else {"rate_hz": rate_hz}))
-            sc = make_scenario(site, name, params)
-            if not sc.detections:
-                continue
-            period = max(max(d.t_s for d in sc.detections), 0.0) + gap
-            offset = round(k * period / copies * params.rate_hz) / params.rate_hz
+            made.append(make_scenario(site, name, params))
+            rate = params.rate_hz
+        if made[0].detections:
+            played.append((name, made))
+    periods, offsets = replay_schedule(
+        [max(d.t_s for d in made[0].detections) for _, made in played],
+        [made[0].truths for _, made in played],
+        copies,
+        rate,
+        gap,
+    )
+    for j, (name, made) in enumerate(played):
+        for k, sc in enumerate(made):
             for loop in range(loops):
-                shift = offset + loop * period
+                shift = offsets[j][k] + loop * periods[j]
                 dets += [dataclasses.replace(d, t_s=round(d.t_s + shift, 6)) for d in sc.detections]
                 for tr in sc.truths:
                     tid = len(truths)

@@ -35,6 +35,8 @@ from typing import Any
 from demtrack.core.site import Site
 from demtrack.core.tracking.types import Detection
 
+from .replay_schedule import replay_schedule
+
 __all__ = [
     "Replay",
     "ReplayFrame",
@@ -118,16 +120,18 @@ def loop_frames(
     *,
     loop: bool = True,
     gap_s: float = LOOP_GAP_S,
+    period_s: float | None = None,
 ) -> Iterator[ReplayFrame]:
     """One scenario's frames with its time 0 moved to ``t0_s``, repeated if ``loop``.
 
-    Loop ``k`` is shifted by ``t0_s + k * period`` with ``period = t_last + gap_s``
-    (scenario times start at 0), so every sensor's times keep growing and a replayed
-    time minus the shift is the scenario's own time (its truth lines up).
+    Loop ``k`` is shifted by ``t0_s + k * period`` with ``period = period_s`` or, by
+    default, ``t_last + gap_s`` (scenario times start at 0), so every sensor's times keep
+    growing and a replayed time minus the shift is the scenario's own time (its truth
+    lines up).
     """
     if not frames:
         return
-    period = max(frames[-1].t_s, 0.0) + gap_s
+    period = max(frames[-1].t_s, 0.0) + gap_s if period_s is None else float(period_s)
     for k in itertools.count() if loop else range(1):
         shift = t0_s + k * period
         for f in frames:
@@ -185,8 +189,11 @@ def scenario_stream(
     ----------
     copies : int
         Copies of each scenario, copy ``k`` made with noise seed ``k`` and started
-        ``k / copies`` of the scenario's period (span plus ``gap_s``) after copy 0,
-        rounded to a whole frame so the copies' frames share batches.
+        ``k / copies`` of the scenario's period after copy 0, rounded to a whole frame so
+        the copies' frames share batches. Periods (at least span plus ``gap_s``) and each
+        scenario's phase come from
+        :func:`~demtrack.server.replay_schedule.replay_schedule`: the loops stay in step
+        and no two vehicles of different scenarios are ever on top of each other.
     rate_hz : float, optional
         The cameras' frame rate (default: the scenarios' own, 10 Hz).
     duration_s : float, optional
@@ -203,16 +210,28 @@ def scenario_stream(
 
     if copies < 1:
         raise ValueError(f"replay copies must be at least 1, got {copies}")
-    streams = []
+    played = []  # per scenario: each copy's frames, copy 0's truths
+    rate = None
     for name in names:
+        made = []
         for k in range(copies):
             params = ScenarioParams(seed=k, **({} if rate_hz is None else {"rate_hz": rate_hz}))
-            frames = scenario_frames(make_scenario(site, name, params).detections)
-            if not frames:
-                continue
-            period = max(frames[-1].t_s, 0.0) + gap_s
-            offset = round(k * period / copies * params.rate_hz) / params.rate_hz
-            streams.append(loop_frames(frames, t0_s + offset, loop=loop, gap_s=gap_s))
+            made.append(make_scenario(site, name, params))
+            rate = params.rate_hz
+        frames = [scenario_frames(sc.detections) for sc in made]
+        if frames[0]:
+            played.append((frames, made[0].truths))
+    if not played or rate is None:
+        return iter(())
+    periods, offsets = replay_schedule(
+        [max(f[0][-1].t_s, 0.0) for f, _ in played], [tr for _, tr in played], copies, rate, gap_s
+    )
+    streams = [
+        loop_frames(frames[k], t0_s + offsets[j][k], loop=loop, period_s=periods[j])
+        for j, (frames, _) in enumerate(played)
+        for k in range(copies)
+        if frames[k]
+    ]
     merged = merge_frames(streams)
     if duration_s is None:
         return merged
