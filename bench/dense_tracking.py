@@ -101,24 +101,15 @@ def dense_scene(
     is shifted by ``offsets[j][k] + l * periods[j]``.
     """
     from demtrack.core.tracking import TruthPath
-    from demtrack.samplesite.scenarios import ScenarioParams, make_scenario
-    from demtrack.server.replay import LOOP_GAP_S
+    from demtrack.server.replay import LOOP_GAP_S, scenario_copies
     from demtrack.server.replay_schedule import replay_schedule
 
     gap = LOOP_GAP_S if gap_s is None else float(gap_s)
     dets: list[Detection] = []
     truths: list[TruthPath] = []
     labels: dict[int, str] = {}
-    played = []
-    rate = 10.0
-    for name in names:
-        made = []
-        for k in range(copies):
-            params = ScenarioParams(seed=k, **({} if rate_hz is None else {"rate_hz": rate_hz}))
-            made.append(make_scenario(site, name, params))
-            rate = params.rate_hz
-        if made[0].detections:
-            played.append((name, made))
+    made_all, rate = scenario_copies(site, names, copies, rate_hz)
+    played = [(name, made) for name, made in made_all if made[0].detections]
     periods, offsets = replay_schedule(
         [max(d.t_s for d in made[0].detections) for _, made in played],
         [made[0].truths for _, made in played],

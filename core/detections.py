@@ -48,7 +48,7 @@ import io
 import json
 import math
 import os
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -159,6 +159,16 @@ class _Collector:
         self.counts[reason] += 1
         if sum(1 for e in self.examples if e.reason == reason) < self.max_examples:
             self.examples.append(IngestIssue(line, reason, message))
+
+    def offer(self, line: int, parse: Callable[[], Mapping[str, Any]]) -> None:
+        """Add the record ``parse()`` makes, or count the reason it refuses (``_Skip``)."""
+        try:
+            rec = parse()
+        except _Skip as skip:
+            self.n_records += 1
+            self.skip(line, skip.reason, skip.message)
+            return
+        self.add(line, rec)
 
     def add(self, line: int, rec: Mapping[str, Any]) -> None:
         """Check one record's values (already typed) and accept or skip it."""
@@ -293,13 +303,7 @@ def read_detections_csv(
                 col.n_records += 1
                 col.skip(line, "malformed", f"{len(row)} fields, header has {len(header)}")
                 continue
-            try:
-                rec = _csv_record(row, pos)
-            except _Skip as skip:
-                col.n_records += 1
-                col.skip(line, skip.reason, skip.message)
-                continue
-            col.add(line, rec)
+            col.offer(line, lambda row=row: _csv_record(row, pos))
     return col.result()
 
 
@@ -336,15 +340,8 @@ def read_detections_jsonl(
     col = _Collector(sensors, max_examples, edge_tolerance_px)
     with _open(source, "r") as fh:
         for line_no, text in enumerate(fh, start=1):
-            if not text.strip():
-                continue
-            try:
-                rec = _json_record(text)
-            except _Skip as skip:
-                col.n_records += 1
-                col.skip(line_no, skip.reason, skip.message)
-                continue
-            col.add(line_no, rec)
+            if text.strip():
+                col.offer(line_no, lambda text=text: _json_record(text))
     return col.result()
 
 
@@ -362,13 +359,7 @@ def read_detection_records(
     """
     col = _Collector(sensors, max_examples, edge_tolerance_px)
     for line_no, obj in enumerate(records, start=1):
-        try:
-            rec = _object_record(obj)
-        except _Skip as skip:
-            col.n_records += 1
-            col.skip(line_no, skip.reason, skip.message)
-            continue
-        col.add(line_no, rec)
+        col.offer(line_no, lambda obj=obj: _object_record(obj))
     return col.result()
 
 

@@ -29,7 +29,7 @@ import math
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from demtrack.core.site import Site
@@ -43,6 +43,7 @@ __all__ = [
     "detection_record",
     "loop_frames",
     "merge_frames",
+    "scenario_copies",
     "scenario_frames",
     "scenario_stream",
     "start_time_after",
@@ -169,6 +170,24 @@ def start_time_after(last_times: dict[str, float], gap_s: float = LOOP_GAP_S) ->
     return float(math.ceil(max(last_times.values()) + gap_s))
 
 
+def scenario_copies(
+    site: Site, names: Sequence[str], copies: int, rate_hz: float | None = None
+) -> tuple[list[tuple[str, list[Any]]], float]:
+    """Each named scenario's copies (copy ``k`` with noise seed ``k``) and the frame rate.
+
+    ``rate_hz``: the cameras' frame rate (default: the scenarios' own).
+    """
+    from demtrack.samplesite.scenarios import ScenarioParams, make_scenario
+
+    made = []
+    params = ScenarioParams(**({} if rate_hz is None else {"rate_hz": rate_hz}))
+    for name in names:
+        made.append(
+            (name, [make_scenario(site, name, replace(params, seed=k)) for k in range(copies)])
+        )
+    return made, params.rate_hz
+
+
 def scenario_stream(
     site: Site,
     names: Sequence[str],
@@ -206,22 +225,15 @@ def scenario_stream(
     ValueError
         ``copies`` below 1.
     """
-    from demtrack.samplesite.scenarios import ScenarioParams, make_scenario
-
     if copies < 1:
         raise ValueError(f"replay copies must be at least 1, got {copies}")
     played = []  # per scenario: each copy's frames, copy 0's truths
-    rate = None
-    for name in names:
-        made = []
-        for k in range(copies):
-            params = ScenarioParams(seed=k, **({} if rate_hz is None else {"rate_hz": rate_hz}))
-            made.append(make_scenario(site, name, params))
-            rate = params.rate_hz
-        frames = [scenario_frames(sc.detections) for sc in made]
+    made, rate = scenario_copies(site, names, copies, rate_hz)
+    for _, scenarios in made:
+        frames = [scenario_frames(sc.detections) for sc in scenarios]
         if frames[0]:
-            played.append((frames, made[0].truths))
-    if not played or rate is None:
+            played.append((frames, scenarios[0].truths))
+    if not played:
         return iter(())
     periods, offsets = replay_schedule(
         [max(f[0][-1].t_s, 0.0) for f, _ in played], [tr for _, tr in played], copies, rate, gap_s
