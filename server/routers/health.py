@@ -35,6 +35,8 @@ def status(state: StateDep) -> dict[str, Any]:
     counts["ws_clients"] = len(state.hub.clients)
     counts["ws_dropped"] = state.hub.n_dropped
     counts["late_fixes"] = state.pipeline.n_late
+    counts["ingest_commits"] = state.pipeline.n_commits  # group commit: batches per commit
+    counts["ingest_batches"] = state.pipeline.n_batches
     return {
         "status": "ok",
         "schema_version": state.store.schema_version(),
