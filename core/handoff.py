@@ -30,8 +30,10 @@ from .visibility import target_visible_fraction
 __all__ = [
     "HandoffPrediction",
     "HandoffScore",
+    "HandoffTarget",
     "evaluate_handoffs",
     "predict_handoff",
+    "predict_handoffs",
     "visibility_timeline",
 ]
 
@@ -136,14 +138,76 @@ def predict_handoff(
     target within 5 m of a road is extrapolated along it (a vehicle follows the road),
     keeping its lateral offset; otherwise in a straight line.
     """
+    target = HandoffTarget(p_enu, v_enu, current, height_m, roads)
+    return predict_handoffs(
+        dem,
+        sensors,
+        [target],
+        horizon_s=horizon_s,
+        dt_s=dt_s,
+        min_fraction=min_fraction,
+        max_range_m=max_range_m,
+    )[0]
+
+
+@dataclass(frozen=True, eq=False)
+class HandoffTarget:
+    """One target for :func:`predict_handoffs`: the arguments of :func:`predict_handoff`."""
+
+    p_enu: np.ndarray
+    v_enu: np.ndarray
+    current: str | None = None
+    height_m: float = 1.5
+    roads: RoadNetwork | None = None
+
+
+def predict_handoffs(
+    dem: Dem,
+    sensors: Mapping[str, Sensor],
+    targets: Sequence[HandoffTarget],
+    *,
+    horizon_s: float = 20.0,
+    dt_s: float = 0.5,
+    min_fraction: float = 0.5,
+    max_range_m: float = 1000.0,
+) -> list[HandoffPrediction]:
+    """:func:`predict_handoff` for many targets at once: the same predictions.
+
+    Every target's future path is checked against each camera in one visibility call per
+    camera and target height (not one per target and camera): the per-point answers are
+    the same, the fixed cost of a call is paid a few times instead of once per target.
+    """
     times = np.arange(0.0, horizon_s + 1e-9, dt_s)
-    path = _path(dem, p_enu, v_enu, times, roads)
-    seen = {
-        sid: f >= min_fraction
-        for sid, f in visibility_timeline(
-            dem, sensors, path, height_m, max_range_m=max_range_m
-        ).items()
-    }
+    paths = [_path(dem, t.p_enu, t.v_enu, times, t.roads) for t in targets]
+    fractions: list[dict[str, np.ndarray]] = [{} for _ in targets]
+    for height in sorted({float(t.height_m) for t in targets}):
+        which = [i for i, t in enumerate(targets) if float(t.height_m) == height]
+        stacked = np.concatenate([paths[i] for i in which])
+        for sid, frac in visibility_timeline(
+            dem, sensors, stacked, height, max_range_m=max_range_m
+        ).items():
+            for k, i in enumerate(which):
+                fractions[i][sid] = frac[k * len(times) : (k + 1) * len(times)]
+    return [
+        _decide(dem, sensors, t, path, times, frac, min_fraction, max_range_m)
+        for t, path, frac in zip(targets, paths, fractions, strict=True)
+    ]
+
+
+def _decide(
+    dem: Dem,
+    sensors: Mapping[str, Sensor],
+    target: HandoffTarget,
+    path: np.ndarray,
+    times: np.ndarray,
+    fractions: Mapping[str, np.ndarray],
+    min_fraction: float,
+    max_range_m: float,
+) -> HandoffPrediction:
+    """One target's prediction from its path and each camera's visible fractions on it."""
+    height_m = target.height_m
+    seen = {sid: f >= min_fraction for sid, f in fractions.items()}
+    current = target.current
     if current is None:
         now = {sid: f[0] for sid, f in seen.items() if f[0]}
         current = next(iter(now), None)
@@ -172,8 +236,8 @@ def predict_handoff(
         for sid, frac in clear.items():
             if frac[k] >= min_fraction:
                 s = sensors[sid]
-                target = path[start + k] + [0.0, 0.0, height_m / 2]
-                d = target - s.head.position_enu
+                aim = path[start + k] + [0.0, 0.0, height_m / 2]
+                d = aim - s.head.position_enu
                 az = float(np.degrees(np.arctan2(d[0], d[1])))
                 tilt = float(np.degrees(np.arctan2(d[2], np.hypot(d[0], d[1]))))
                 pan = float(wrap_deg(az - s.head.mount_yaw_deg))

@@ -42,7 +42,7 @@ from demtrack.core.activity import (
     detect_rendezvous,
     detect_zone_crossings,
 )
-from demtrack.core.handoff import predict_handoff
+from demtrack.core.handoff import HandoffTarget, predict_handoffs
 from demtrack.core.site import Site
 from demtrack.core.target_heights import target_height_for
 from demtrack.core.tracking.types import Track
@@ -253,6 +253,7 @@ class LiveEvents:
     ) -> list[dict[str, Any]]:
         prm = self.params
         out = []
+        moving: list[tuple[Track, np.ndarray, HandoffTarget]] = []
         for tr in tracks:
             if tr.id not in live_ids or len(tr.points) < 2:
                 continue
@@ -263,17 +264,24 @@ class LiveEvents:
                 continue
             v = (last.p_enu - tr.points[k].p_enu) / (t[-1] - t[k])
             current = sorted(last.sensors)[0] if last.sensors else None
-            pred = predict_handoff(
-                self.site.dem,
-                self.site.sensors,
+            target = HandoffTarget(
                 last.p_enu,
                 v,
-                current=current if current in self.site.sensors else None,
-                height_m=target_height_for(tr.cls),
-                horizon_s=prm.handoff_horizon_s,
-                dt_s=prm.handoff_dt_s,
-                roads=self.site.roads if tr.cls == "vehicle" else None,
+                current if current in self.site.sensors else None,
+                target_height_for(tr.cls),
+                self.site.roads if tr.cls == "vehicle" else None,
             )
+            moving.append((tr, v, target))
+        preds = predict_handoffs(
+            self.site.dem,
+            self.site.sensors,
+            [target for _, _, target in moving],
+            horizon_s=prm.handoff_horizon_s,
+            dt_s=prm.handoff_dt_s,
+        )
+        for (tr, v, _), pred in zip(moving, preds, strict=True):
+            t = tr.t_s
+            last = tr.points[-1]
             pair = (pred.current, pred.next_sensor)
             if pred.exit_in_s is None or pred.next_sensor is None:
                 continue

@@ -92,3 +92,43 @@ def test_a_handoff_soon_after_takeover_is_scored_from_the_takeover():
     assert score.handoffs == 1 and score.correct == 1
     assert 0.0 < score.leads_s[0] < 2.0
     assert score.leads_s[0] == pytest.approx(1.0, abs=0.6)
+
+
+def test_many_targets_at_once_get_each_ones_own_prediction(sample_site_dir):
+    """predict_handoffs (one visibility call per camera and height) equals
+    predict_handoff target by target, on the sample site's terrain and roads."""
+    from demtrack.core.handoff import HandoffTarget, predict_handoffs
+    from demtrack.core.site import load_site
+
+    site = load_site(sample_site_dir)
+    rng = np.random.default_rng(3)
+    targets = []
+    for k in range(16):
+        xy = rng.uniform(-120.0, 120.0, 2)
+        z = float(site.dem.sample(xy[:1], xy[1:])[0])
+        speed = rng.uniform(0.5, 12.0)
+        heading = rng.uniform(0, 2 * np.pi)
+        v = np.array([speed * np.sin(heading), speed * np.cos(heading), 0.0])
+        current = [None, "cam1", "cam2", "cam3"][k % 4]
+        roads = site.roads if k % 2 else None
+        targets.append(HandoffTarget(np.array([*xy, z]), v, current, [1.7, 1.5][k % 3 % 2], roads))
+    many = predict_handoffs(site.dem, site.sensors, targets, horizon_s=10.0, dt_s=1.0)
+    for t, got in zip(targets, many, strict=True):
+        one = predict_handoff(
+            site.dem,
+            site.sensors,
+            t.p_enu,
+            t.v_enu,
+            current=t.current,
+            height_m=t.height_m,
+            horizon_s=10.0,
+            dt_s=1.0,
+            roads=t.roads,
+        )
+        for name in ("current", "exit_in_s", "next_sensor", "next_in_s", "slew", "pan_deg"):
+            assert getattr(got, name) == getattr(one, name)
+        assert (got.acquisition_enu is None) == (one.acquisition_enu is None)
+        if one.acquisition_enu is not None:
+            np.testing.assert_array_equal(got.acquisition_enu, one.acquisition_enu)
+    assert {p.next_sensor for p in many} - {None}  # some hand-offs among them
+    assert predict_handoffs(site.dem, site.sensors, []) == []
