@@ -697,6 +697,8 @@ class Pipeline:
         for track in tracks:
             p = track.p_enu
             cached = self._points.get(track.id)
+            if cached is not None and cached[0] is p:
+                continue  # the same Track value as last time (its positions array is cached)
             same = 0
             if cached is not None:
                 old_p, old_pts, old_js = cached
