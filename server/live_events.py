@@ -175,9 +175,22 @@ class LiveEvents:
         prm = self.params
         self.last_eval_t = t_now
         t_from = t_now - prm.window_s
+        # An episode is over once its end lags the present by more than this (s).
+        stale = 2 * prm.every_s + 2 * prm.sample_s + 1.0
+        touch = prm.every_s + prm.sample_s
+        # A track that ended longer ago than that plus the longest convoy lag (and an
+        # evaluation since) can take part in no event still to be announced or extended:
+        # its loitering, zone crossings and rendezvous end when it does, a convoy it leads
+        # at most ``max_lag_s`` later (the follower's time), so they are stale or already
+        # reported; an open episode was closed by the evaluation after it went stale.
+        # Leaving such tracks out keeps the detectors' cost (pairs, for rendezvous and
+        # convoys) to the tracks of the present, not everything the window still holds.
+        recent = t_now - stale - prm.every_s - prm.convoy.max_lag_s - 1.0
         windows = {}
         for tr in tracks:
-            if tr.points and tr.points[-1].t_s >= t_from:
+            if not tr.points or tr.points[-1].t_s < t_from:
+                continue
+            if self._in_play(tr, live_ids, recent):
                 w = _thin(tr, t_from, prm.sample_s)
                 if w is not None:
                     windows[w.id] = w
@@ -185,9 +198,6 @@ class LiveEvents:
         out: list[dict[str, Any]] = []
         found = detect_loitering(ws, prm.loiter) + detect_rendezvous(ws, prm.rendezvous)
         found += detect_convoys([w for w in ws if w.cls == "vehicle"], prm.convoy)
-        # An episode is over once its end lags the present by more than this (s).
-        stale = 2 * prm.every_s + 2 * prm.sample_s + 1.0
-        touch = prm.every_s + prm.sample_s
         seen: set[str] = set()
         for e in found:
             ident = _identity(e)
@@ -224,6 +234,11 @@ class LiveEvents:
         if prm.handoff_horizon_s > 0:
             out += self._handoffs(tracks, live_ids, t_now)
         return out
+
+    @staticmethod
+    def _in_play(track: Track, live_ids: set[int], recent_s: float) -> bool:
+        """Whether ``track`` may still take part in a new or growing event."""
+        return track.id in live_ids or track.points[-1].t_s >= recent_s
 
     def _close(self, ident: str) -> dict[str, Any]:
         body = dict(self._open.pop(ident), state="end", open=False)
