@@ -92,13 +92,32 @@ def pyramid_level_shapes(nrows: int, ncols: int) -> np.ndarray:
     return np.asarray(shapes, dtype=np.int64)
 
 
-def build_pyramid(elevation: np.ndarray) -> MinMaxPyramid:
+def _build_levels_numpy(
+    elev: np.ndarray, nodes: np.ndarray, offsets: np.ndarray, shapes: np.ndarray
+) -> tuple[float, float]:
+    """``build_pyramid_kernel`` (same arguments and result) in plain numpy."""
+    from .raycast_reference import pyramid_reference
+
+    levels = pyramid_reference(elev)[1:]
+    for level, start, (rows, cols) in zip(levels, offsets, shapes, strict=True):
+        nodes[start : start + rows * cols] = level.reshape(-1, 2)
+    finite = elev[np.isfinite(elev)]
+    if finite.size == 0:
+        return float("nan"), float("nan")
+    return float(finite.min()), float(finite.max())
+
+
+def build_pyramid(elevation: np.ndarray, *, use_kernel: bool = True) -> MinMaxPyramid:
     """Build the min/max pyramid of a DEM's elevation grid.
 
     Parameters
     ----------
     elevation : ndarray, float32, shape (nrows, ncols)
         Cell-centre elevations (m), NaN = nodata; at least 2 x 2.
+    use_kernel : bool
+        Build with the numba kernel (default), else with plain numpy: the same pyramid,
+        a few times slower (0.07 s at 600 x 600, 0.5 s at 2000 x 2000) and nothing to
+        compile (``core.raycast``'s light kernels use it).
 
     Returns
     -------
@@ -117,7 +136,8 @@ def build_pyramid(elevation: np.ndarray) -> MinMaxPyramid:
     sizes = shapes[:, 0] * shapes[:, 1]
     offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
     nodes = np.empty((int(sizes.sum()), 2), dtype=np.float32)
-    z_min, z_max = build_pyramid_kernel(elev, nodes, offsets, shapes)
+    build = build_pyramid_kernel if use_kernel else _build_levels_numpy
+    z_min, z_max = build(elev, nodes, offsets, shapes)
     if not (np.isfinite(z_min) and np.isfinite(z_max)):
         raise DemError("DEM has no finite elevation")
     nodes.setflags(write=False)

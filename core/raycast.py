@@ -38,7 +38,9 @@ walls); it counts crossings only once it has come up above the surface again.
 Ranges are metres along the unit direction; points are ``origin + range * unit``. In
 ``mode="all"`` the kernel keeps the first few hits per ray and re-walks the rare rays with
 more, straight into the CSR arrays. The kernels use numba's thread pool
-(``numba.set_num_threads``); :func:`warm_up` compiles them ahead of use.
+(``numba.set_num_threads``); :func:`warm_up` compiles them ahead of use. For a cold
+start, :func:`use_light_kernels` swaps in quick-to-compile twins with the same answers
+(``core.raycast_light_kernels``) until the fast kernels are ready.
 """
 
 from __future__ import annotations
@@ -56,6 +58,7 @@ import numpy as np
 
 from . import angular_kernels as _ak
 from . import raycast_kernels as _k
+from . import raycast_light_kernels as _lk
 from .angular_index import (
     DEFAULT_N_AZ,
     AngularCache,
@@ -77,6 +80,9 @@ __all__ = [
     "RayHits",
     "RayStatus",
     "cast_rays",
+    "light_kernels",
+    "light_kernels_on",
+    "use_light_kernels",
     "warm_up",
 ]
 
@@ -213,7 +219,7 @@ class RayCaster:
             raise DemError(f"elevation has shape {elev.shape}, grid says {grid.shape}")
         if np.isinf(elev).any():
             raise DemError("elevation contains infinite values (nodata must be NaN)")
-        return cls(grid, elev, build_pyramid(elev))
+        return cls(grid, elev, build_pyramid(elev, use_kernel=not _LIGHT.on))
 
     def prepare_origin(
         self, origin: np.ndarray, directions: np.ndarray | None = None
@@ -278,6 +284,20 @@ class RayCaster:
         coherent: bool | None = None,
     ) -> RayHits:
         """Cast rays; see :func:`cast_rays`."""
+        return self._cast(origins, directions, max_range, mode, max_hits, coherent, light=_LIGHT.on)
+
+    def _cast(
+        self,
+        origins: np.ndarray,
+        directions: np.ndarray,
+        max_range: float | np.ndarray,
+        mode: str,
+        max_hits: int,
+        coherent: bool | None,
+        *,
+        light: bool,
+    ) -> RayHits:
+        """:meth:`cast` with the light (``True``) or fast kernels."""
         o, d, rng = _validate_rays(origins, directions, max_range)
         if coherent not in (None, True, False):
             raise RaycastError(f"coherent must be None, True or False, got {coherent!r}")
@@ -312,14 +332,17 @@ class RayCaster:
         )
         with _threads_for(n):
             threads = numba.get_num_threads()
+            # Light kernels: an angular index only when asked for (its kernels are slow to
+            # compile); the answers are the same either way.
             runs = (
                 _ak.origin_runs_kernel(o, 1 if coherent else MIN_COHERENT_RUN)
-                if coherent is not False and n
+                if n and (coherent or (coherent is None and not light))
                 else np.empty((0, 2), np.int64)
             )
             outs = (buf, counts, status, crossed, truncated)
             if len(runs) == 0:
-                _k.cast_kernel(*args, first, max_hits, threads, *outs)
+                cast_kernel = _lk.cast_kernel_light if light else _k.cast_kernel
+                cast_kernel(*args, first, max_hits, threads, *outs)
             else:
                 # Runs of one origin use its angular index; the rays between them take the
                 # pyramid walk (the same kernel with no azimuth bin built).
@@ -348,10 +371,44 @@ class RayCaster:
             del buf
             if not first:
                 big = np.flatnonzero(counts > cap).astype(np.int64)
-                if len(big):
+                if len(big) and light:
+                    _recast_light(args, threads, big, max_hits, offsets, range_m, points)
+                elif len(big):
                     _k.cast_all_refill_kernel(*args, max_hits, big, offsets, range_m)
                     _k.hit_points_kernel(o, d, big, offsets, range_m, points)
         return RayHits(offsets, range_m, points, status, crossed, truncated)
+
+
+def _recast_light(
+    args: tuple[Any, ...],
+    threads: int,
+    big: np.ndarray,
+    max_hits: int,
+    offsets: np.ndarray,
+    range_m: np.ndarray,
+    points: np.ndarray,
+) -> None:
+    """Light kernels' re-walk: cast rays ``big`` again with room for all their hits.
+
+    The same walk as the first pass, so the same hits; written into their CSR slots.
+    Every array has the first pass's dtype and layout: no kernel compiles for this.
+    """
+    o, d, rng = args[-3:]
+    sub = (*args[:-3], o[big], d[big], rng[big])
+    nb = len(big)
+    buf = np.empty((nb, max_hits), np.float64)
+    counts = np.empty(nb, np.int64)
+    flags = (np.empty(nb, np.int8), np.empty(nb, bool), np.empty(nb, bool))
+    _lk.cast_kernel_light(*sub, False, max_hits, threads, buf, counts, *flags)  # type: ignore[call-arg]
+    sub_off = np.zeros(nb + 1, np.int64)
+    np.cumsum(counts, out=sub_off[1:])
+    m = int(sub_off[-1])
+    sub_range = np.empty(m, np.float64)
+    sub_points = np.empty((m, 3), np.float64)
+    _k.gather_hits_kernel(buf, counts, sub_off, sub[-3], sub[-2], sub_range, sub_points)
+    slots = np.repeat(offsets[big] - sub_off[:-1], counts) + np.arange(m)
+    range_m[slots] = sub_range
+    points[slots] = sub_points
 
 
 @contextlib.contextmanager
@@ -452,6 +509,45 @@ def cast_rays(
     )
 
 
+class _LightState:
+    """Whether casts use the light kernels (``core.raycast_light_kernels``)."""
+
+    on = False
+
+
+_LIGHT = _LightState()
+
+
+def use_light_kernels(enabled: bool = True) -> None:
+    """Cast with the light kernels (``True``) or the fast ones (``False``, the default).
+
+    The light kernels give the same answers bit for bit and compile in well under half the
+    time; they cast on one thread (releasing the GIL), a new caster builds its min/max
+    pyramid in plain numpy, and ``coherent=None`` builds no angular index
+    (``coherent=True`` still does). For a process whose numba cache is cold and that
+    needs answers before the fast kernels could compile (the sample-site build's renders,
+    ``demtrack demo`` until its warm-up is done). Process-wide; :func:`warm_up` turns them
+    off once the fast kernels are ready.
+    """
+    _LIGHT.on = bool(enabled)
+
+
+def light_kernels_on() -> bool:
+    """Whether casts use the light kernels (see :func:`use_light_kernels`)."""
+    return _LIGHT.on
+
+
+@contextlib.contextmanager
+def light_kernels() -> Iterator[None]:
+    """Cast with the light kernels inside the block; the previous choice after it."""
+    before = _LIGHT.on
+    _LIGHT.on = True
+    try:
+        yield
+    finally:
+        _LIGHT.on = before
+
+
 def warm_up(angular: bool = True) -> None:
     """Compile (or load from numba's on-disk cache) every kernel, on a tiny DEM.
 
@@ -464,14 +560,20 @@ def warm_up(angular: bool = True) -> None:
     angular : bool
         Also compile the angular-index kernels, used only by casts of at least
         ``MIN_COHERENT_RUN`` rays from one origin (or ``coherent=True``).
+
+    Notes
+    -----
+    It always warms the fast kernels, then turns the light ones off
+    (:func:`use_light_kernels`): casts switch to the fast kernels once they are ready.
     """
     elev = np.arange(16, dtype=np.float32).reshape(4, 4)
     elev[0, 0] = np.nan
+    build_pyramid(elev)  # the kernel, even while light kernels are on
     caster = RayCaster.from_dem(SimpleNamespace(grid=GridSpec(0.0, 4.0, 1.0, 4, 4), elevation=elev))
     o = np.array([[2.0, 2.0, 100.0], [0.5, 3.5, 100.0]])
     d = np.array([[0.1, 0.1, -1.0], [0.0, 0.0, -1.0]])
-    caster.cast(o, d, mode="first")
-    caster.cast(o, d, mode="all", max_hits=8)
+    caster._cast(o, d, np.inf, "first", 256, None, light=False)
+    caster._cast(o, d, np.inf, "all", 8, None, light=False)
     if angular:
         # The angular-index path (camera rays): build, cast, and the pyramid walk between runs.
         _warm_angular(caster)
@@ -479,15 +581,24 @@ def warm_up(angular: bool = True) -> None:
     # compiles the re-walk kernel too.
     zig = np.tile(np.array([0.0, 10.0], np.float32), 8)
     zigzag = SimpleNamespace(grid=GridSpec(0.0, 2.0, 1.0, 2, 16), elevation=np.vstack([zig, zig]))
-    cast_rays(zigzag, np.array([[0.5, 1.0, 5.0]]), np.array([[1.0, 0.0, 0.0]]))
+    RayCaster.from_dem(zigzag)._cast(
+        np.array([[0.5, 1.0, 5.0]]),
+        np.array([[1.0, 0.0, 0.0]]),
+        np.inf,
+        "all",
+        256,
+        None,
+        light=False,
+    )
+    use_light_kernels(False)
 
 
 def _warm_angular(caster: RayCaster) -> None:
     """Compile the angular-index kernels (build, cast, the walk between runs)."""
     o3 = np.array([[2.0, 2.0, 100.0], [2.0, 2.0, 100.0], [0.5, 3.5, 100.0]])
     d3 = np.array([[0.1, 0.1, -1.0], [0.2, -0.1, -1.0], [0.0, 0.0, -1.0]])
-    caster.cast(o3, d3, mode="first", coherent=True)
-    caster.cast(o3, d3, mode="all", max_hits=8, coherent=True)
+    caster._cast(o3, d3, np.inf, "first", 256, True, light=False)
+    caster._cast(o3, d3, np.inf, "all", 8, True, light=False)
 
 
 def _validate_rays(

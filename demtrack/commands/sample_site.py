@@ -33,7 +33,7 @@ DEMO_SCENARIOS = ["vehicle-run", "pedestrians"]
 def ensure_sample_site(path: Path, *, rebuild: bool = False, warmers: Any = None) -> Path:
     """Build the sample site at ``path`` unless a site is already there.
 
-    The ray-casting kernels the build renders with compile in two child processes while
+    The light ray-casting kernels the build renders with compile in a child process while
     it scans and grids (``warmers``: already started ones, else started here); a site
     already there stops them.
     """
@@ -97,24 +97,51 @@ def _fresh_db(path: Path) -> None:
 def _live(args: argparse.Namespace) -> int:
     t_start = time.monotonic()
     live = live_overrides(args, DEMO_SCENARIOS)  # checks the options before any work
-    if (args.site / MANIFEST).exists():
-        return _serve_demo(args, args.site, live, t_start, None)
+    from demtrack.core.raycast import use_light_kernels
     from demtrack.samplesite.kernel_warmup import KernelWarmers
 
-    # Cold start: the kernels compile in two children beside the server imports and the
-    # scan; the server's own warm-up then waits for a low-priority third child.
-    warmers = KernelWarmers.start()
-    server_warmer = None
-    try:
-        import demtrack.server.app  # noqa: F401 - imported while the kernels compile
-
-        site_dir = ensure_sample_site(args.site, warmers=warmers)
+    if (args.site / MANIFEST).exists():
+        # The build left the light kernels in numba's cache; the fast ones may be missing
+        # (a first run stopped early): the same low-priority child loads or compiles them.
         server_warmer = KernelWarmers.start(["server"])
+        try:
+            use_light_kernels(True)
+            return _serve_demo(args, args.site, live, t_start, server_warmer)
+        finally:
+            server_warmer.stop()
+
+    # Cold start: the light kernels the build and the first page need compile in a child
+    # beside the scan and the server imports; a second child, at the lowest CPU priority,
+    # compiles the fast kernels, and the server's warm-up waits for it before it loads
+    # them and casts switch over (core.raycast.use_light_kernels).
+    warmers = KernelWarmers.start()
+    server_warmer = KernelWarmers.start(["server"])
+    try:
+        use_light_kernels(True)
+        site_dir = ensure_sample_site(args.site, warmers=_ImportServerWhileWaiting(warmers))
         return _serve_demo(args, site_dir, live, t_start, server_warmer)
     finally:
         warmers.stop()
-        if server_warmer is not None:
-            server_warmer.stop()
+        server_warmer.stop()
+
+
+class _ImportServerWhileWaiting:
+    """The build's warmers; when the build waits for them, the server is imported first.
+
+    The build scans and grids while the kernels compile; the server's imports (seconds of
+    CPU) then fill the time the build would spend waiting for them.
+    """
+
+    def __init__(self, warmers: Any) -> None:
+        self.warmers = warmers
+
+    def wait(self) -> list[int]:
+        import demtrack.server.app  # noqa: F401
+
+        return list(self.warmers.wait())
+
+    def stop(self) -> None:
+        self.warmers.stop()
 
 
 def _serve_demo(

@@ -12,7 +12,36 @@ from typing import Any
 from .choices import SCENARIO_NAMES
 from .common import DEFAULT_SITE
 
-__all__ = ["add_live_arguments", "live_overrides", "print_token", "register", "serve_app"]
+__all__ = [
+    "SERVER_GC_THRESHOLDS",
+    "add_live_arguments",
+    "live_overrides",
+    "print_token",
+    "register",
+    "serve_app",
+    "tune_gc_for_serving",
+]
+
+
+#: Cyclic-GC thresholds for the long-running server (CPython's default: 700, 10, 10).
+SERVER_GC_THRESHOLDS = (10_000, 20, 100)
+
+
+def tune_gc_for_serving() -> None:
+    """Make the cyclic garbage collector cheap for a long-lived server's large heap.
+
+    The server holds many long-lived objects (tracks, their points and JSON, the reorder
+    buffer); with CPython's default thresholds the full collections that walk all of them
+    came often enough that CPU per detection more than doubled after three minutes of a
+    20-track replay (1.4 -> 3.6 ms in-process; 1.5 ms with the collector off). Objects
+    alive once start-up is done are frozen (never scanned again) and the thresholds
+    raised: young garbage is still collected, full collections are rare. Memory freed
+    by reference counting (nearly all of it here) is unaffected.
+    """
+    import gc
+
+    gc.freeze()
+    gc.set_threshold(*SERVER_GC_THRESHOLDS)
 
 
 def serve_app(
@@ -58,6 +87,7 @@ def serve_app(
     def watch() -> None:
         while not done.wait(0.05):
             if server.started:
+                tune_gc_for_serving()
                 if on_ready is not None:
                     on_ready(int(server.servers[0].sockets[0].getsockname()[1]))
                 return

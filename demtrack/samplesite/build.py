@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -24,6 +25,7 @@ from demtrack.core.errors import SiteError
 from demtrack.core.geodesy import LocalFrame
 from demtrack.core.orthophoto import write_orthophoto
 from demtrack.core.pantilt import wrap_deg
+from demtrack.core.raycast import light_kernels
 from demtrack.core.render import render_view
 from demtrack.core.road_io import write_roads_geojson
 from demtrack.core.roads import RoadNetwork
@@ -56,7 +58,8 @@ def build_sample_site(
     ``warmers`` (:class:`~demtrack.samplesite.kernel_warmup.KernelWarmers`, optional) are
     child processes compiling the ray-casting kernels into numba's cache while the scan,
     DEM and orthophoto are made; the camera views are rendered once they are done (they
-    are stopped if the build fails first).
+    are stopped if the build fails first), with the light kernels
+    (:func:`~demtrack.core.raycast.use_light_kernels`).
     """
     out = Path(out_dir)
     if out.exists() and any(out.iterdir()) and not (out / MANIFEST).exists():
@@ -113,24 +116,32 @@ def _build(
         warmers.wait()  # a failed job only means the render compiles what is missing
         step("ray-casting kernels compiled (beside the steps above)")
 
-    sensors, truth = [], {}
-    for spec, head, pan, tilt in sighting_heads(world):
+    def view(item: tuple) -> tuple:
+        spec, head, pan, tilt = item
         cal = head.calibrate()
         calibrated = head.with_mount_yaw(cal.yaw_deg)
         image_path = out / "images" / f"{spec.id}.png"
         sensor = Sensor(spec.id, spec.name, calibrated, pan, tilt, image_path)
         Image.fromarray(render_view(sensor.camera, dem, rgb, grid)).save(image_path)
-        sensors.append(sensor)
-        truth[spec.id] = {
-            "true_mount_yaw_deg": spec.true_mount_yaw_deg,
-            "calibrated_mount_yaw_deg": cal.yaw_deg,
-            "yaw_error_deg": float(wrap_deg(cal.yaw_deg - spec.true_mount_yaw_deg)),
-            "outliers": [head.landmarks[i].name for i in np.flatnonzero(cal.outliers)],
-        }
-        step(
-            f"{spec.id} ({spec.name}): yaw {cal.yaw_deg:.3f} deg (true"
-            f" {spec.true_mount_yaw_deg}), rms {cal.rms_deg:.3f} deg, image rendered"
-        )
+        return spec, head, cal, sensor
+
+    sensors, truth = [], {}
+    # Two cameras at a time: the light kernels release the GIL. Same pixels as the fast
+    # kernels, which take three times as long to compile (a cold start's render).
+    with light_kernels(), ThreadPoolExecutor(2) as pool:
+        dem.ray_caster()  # the pyramid (in numpy), once, before the threads share it
+        for spec, head, cal, sensor in pool.map(view, sighting_heads(world)):
+            sensors.append(sensor)
+            truth[spec.id] = {
+                "true_mount_yaw_deg": spec.true_mount_yaw_deg,
+                "calibrated_mount_yaw_deg": cal.yaw_deg,
+                "yaw_error_deg": float(wrap_deg(cal.yaw_deg - spec.true_mount_yaw_deg)),
+                "outliers": [head.landmarks[i].name for i in np.flatnonzero(cal.outliers)],
+            }
+            step(
+                f"{spec.id} ({spec.name}): yaw {cal.yaw_deg:.3f} deg (true"
+                f" {spec.true_mount_yaw_deg}), rms {cal.rms_deg:.3f} deg, image rendered"
+            )
     doc = site_manifest(SITE_NAME, frame, sensors, out, extra={"generator": {"seed": seed}})
     (out / MANIFEST).write_text(json.dumps(doc, indent=2), "utf-8")
     (out / "truth.json").write_text(json.dumps({"sensors": truth}, indent=2), "utf-8")

@@ -1,25 +1,30 @@
 """Compile the sample-site build's numba kernels in child processes, beside the build.
 
-On a machine with an empty numba cache the sample-site build spends most of its time
-compiling the ray-casting kernels that render the camera views (``cast_kernel`` alone is
-over half of it). Each job here compiles one share of them on a tiny synthetic DEM, in its
-own process, and leaves the machine code in numba's on-disk cache; the build meanwhile
-scans the world and grids the DEM and orthophoto, then waits for the jobs and loads the
-kernels from the cache. Two jobs split the compile between two cores:
+On a machine with an empty numba cache the sample-site build would spend most of its time
+compiling the ray-casting kernels that render the camera views. The build renders with the
+light kernels (``core.raycast_light_kernels``: the same answers, a quarter of the compile);
+each job here compiles one share of what it and a cold ``demtrack demo`` need on a tiny
+synthetic DEM, in its own process, and leaves the machine code in numba's on-disk cache;
+the build meanwhile scans the world and grids the DEM and orthophoto, then waits for the
+``cast`` job and loads the kernels from the cache:
 
 ``cast``
-    Everything a camera render calls except the pyramid build: the undistortion kernel,
-    the ray checks, the first-hit pyramid walk (``cast_kernel``) and the hit gather.
+    Everything a camera render calls: the undistortion kernel, the ray checks, the light
+    pyramid walk (``cast_kernel_light``) and the hit gather (with light kernels on, the
+    min/max pyramid is built in numpy). That is also all a cold console's casts need
+    until its warm-up is done (all-hits casts re-cast their rare many-hit rays with the
+    same kernel). The build waits for this job only.
 ``pyramid``
-    The min/max pyramid build, plus the small run detector every server cast calls
-    (``origin_runs_kernel``).
+    The min/max pyramid kernel alone (the ``server`` job compiles it too).
 ``server``
-    What the console server's start-up warm-up adds (the all-hits re-walk and its hit
-    points); run after the other two, at low priority, while the server starts.
+    The fast kernels the console server's start-up warm-up loads (``cast_kernel``, the
+    all-hits re-walk, the pyramid, the run detector); started with ``cast`` at the lowest
+    CPU priority, so it takes only the CPU the build and the server's start leave.
 
 The angular-index kernels are never compiled here. Each job compiles exactly the
 specialisations the build and the server use (the same dtypes, layouts and read-only
-flags); ``tests/samplesite/test_kernel_warmup.py`` checks that against a real render.
+flags); ``tests/samplesite/test_kernel_warmup.py`` checks that against a real render and
+a light-kernel session of the console's casts.
 Run as ``python -m demtrack.samplesite.kernel_warmup JOB``.
 """
 
@@ -38,9 +43,8 @@ __all__ = ["JOBS", "KernelWarmers", "run_job"]
 
 #: Job names, in the order they are best started.
 JOBS = ("cast", "pyramid", "server")
-#: CPU priority (``nice``) of each job's process. ``cast`` is the longest compile and the
-#: build waits for it: it keeps full priority, so the parent's scan and the ``pyramid``
-#: job share the other core; ``server`` only uses CPU that nothing else wants.
+#: CPU priority (``nice``) of each job's process. The build waits for ``cast``: it keeps
+#: full priority beside the parent's scan; ``server`` only uses CPU nothing else wants.
 _NICE = {"cast": 0, "pyramid": 5, "server": 19}
 
 
@@ -62,47 +66,20 @@ def _tiny_scene() -> tuple[Any, np.ndarray, Any, Any]:
     return dem, ortho, ortho_grid, camera
 
 
-def _pyramid_by_numpy(
-    elev: np.ndarray, nodes: np.ndarray, offsets: np.ndarray, shapes: np.ndarray
-) -> tuple[float, float]:
-    """Stand-in for ``build_pyramid_kernel`` (same arguments and result), in plain numpy."""
-    import numpy as np
-
-    from demtrack.core.raycast_reference import pyramid_reference
-
-    levels = pyramid_reference(elev)[1:]
-    for level, start, (rows, cols) in zip(levels, offsets, shapes, strict=True):
-        nodes[start : start + rows * cols] = level.reshape(-1, 2)
-    finite = elev[np.isfinite(elev)]
-    return float(finite.min()), float(finite.max())
-
-
 def _job_cast() -> None:
-    from demtrack.core import pyramid
+    from demtrack.core.raycast import light_kernels
     from demtrack.core.render import render_view
 
     dem, ortho, ortho_grid, camera = _tiny_scene()
-    # The pyramid is left to the ``pyramid`` job: build this one without its kernel.
-    real = pyramid.build_pyramid_kernel
-    pyramid.build_pyramid_kernel = _pyramid_by_numpy
-    try:
-        dem.ray_caster()
-    finally:
-        pyramid.build_pyramid_kernel = real
-    render_view(camera, dem, ortho, ortho_grid)
+    with light_kernels():  # as the build renders: the pyramid is built in numpy
+        render_view(camera, dem, ortho, ortho_grid)
 
 
 def _job_pyramid() -> None:
-    import numpy as np
-
-    from demtrack.core import angular_kernels
     from demtrack.core.pyramid import build_pyramid
 
     dem, _, _, _ = _tiny_scene()
     build_pyramid(dem.elevation)
-    # Every cast with ``coherent=None`` (the server's) first looks for runs of one origin.
-    o = np.zeros((2, 3), np.float64)
-    angular_kernels.origin_runs_kernel(o, 1)
 
 
 def _job_server() -> None:
@@ -144,7 +121,7 @@ class KernelWarmers:
         self.procs = list(procs)
 
     @classmethod
-    def start(cls, jobs: Sequence[str] = ("cast", "pyramid")) -> KernelWarmers:
+    def start(cls, jobs: Sequence[str] = ("cast",)) -> KernelWarmers:
         """Start one child per job, each at its job's CPU priority."""
         unknown = [j for j in jobs if j not in _JOB_FUNCS]
         if unknown:

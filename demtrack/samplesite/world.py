@@ -170,18 +170,30 @@ class World:
 
     def crown_z(self, x: ArrayLike, y: ArrayLike) -> np.ndarray:
         """Top of the tree crowns (m), NaN where no crown is overhead."""
-        x = np.asarray(x, dtype=np.float64)
-        y = np.asarray(y, dtype=np.float64)
-        out = np.full(np.broadcast(x, y).shape, np.nan)
+        x, y = np.broadcast_arrays(np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64))
+        shape = x.shape
+        x, y = x.ravel(), y.ravel()
+        out = np.full(x.shape, np.nan)
         g = self.ground_z(x, y)
+        # Each tree is evaluated on the points near it only (a crown covers a tiny share
+        # of the site): the same arithmetic on every point it can reach, so the same bits
+        # as evaluating it everywhere. Sorting by x once makes "near" two binary searches.
+        order = np.argsort(x, kind="stable")
+        xs = x[order]
         for t in self.trees:
-            r2 = ((x - t.x) ** 2 + (y - t.y) ** 2) / t.r_m**2
+            reach = t.r_m * 1.001 + 1e-9  # wider than the disc: rounding cannot drop a point
+            lo = int(np.searchsorted(xs, t.x - reach, side="left"))
+            hi = int(np.searchsorted(xs, t.x + reach, side="right"))
+            idx = order[lo:hi]
+            idx = idx[np.abs(y[idx] - t.y) <= reach]
+            xi, yi = x[idx], y[idx]
+            r2 = ((xi - t.x) ** 2 + (yi - t.y) ** 2) / t.r_m**2
             top = float(self.ground_z(t.x, t.y)) + t.top_m
             base = float(self.ground_z(t.x, t.y)) + t.base_m
             z = top - (top - base) * r2
-            z = np.where((r2 <= 1.0) & (z > g), z, np.nan)
-            out = np.fmax(out, z)
-        return out
+            z = np.where((r2 <= 1.0) & (z > g[idx]), z, np.nan)
+            out[idx] = np.fmax(out[idx], z)
+        return out.reshape(shape)
 
     def surface_z(self, x: ArrayLike, y: ArrayLike) -> np.ndarray:
         """First-return surface (m): the highest of ground, roof and crown."""

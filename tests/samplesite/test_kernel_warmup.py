@@ -1,4 +1,4 @@
-"""The warm-up jobs compile exactly the kernels the sample-site build uses, and no index."""
+"""The warm-up jobs compile exactly the kernels the sample-site build and a cold console use."""
 
 from __future__ import annotations
 
@@ -13,14 +13,22 @@ from demtrack.samplesite.kernel_warmup import KernelWarmers
 # In a fresh process: which specialisations each numba kernel holds after each step.
 PROBE = r"""
 import json, sys
+import numpy as np
 from numba.core.dispatcher import Dispatcher
-from demtrack.core import angular_kernels, camera, raycast_kernels, viewshed_kernels
+from demtrack.core import (
+    angular_kernels, camera, raycast, raycast_kernels, raycast_light_kernels, viewshed_kernels
+)
+from demtrack.core.dem import Dem
+from demtrack.core.grid import GridSpec
+from demtrack.core.site import load_site
 from demtrack.samplesite.build import build_sample_site
 from demtrack.samplesite.kernel_warmup import run_job
+from demtrack.server.footprints import footprint
 
 def held():
     out = {}
-    for mod in (angular_kernels, camera, raycast_kernels, viewshed_kernels):
+    mods = (angular_kernels, camera, raycast_kernels, raycast_light_kernels, viewshed_kernels)
+    for mod in mods:
         for name, obj in vars(mod).items():
             if isinstance(obj, Dispatcher):
                 out[f"{mod.__name__.rsplit('.', 1)[1]}.{name}"] = [str(s) for s in obj.signatures]
@@ -32,17 +40,33 @@ class InProcessWarmers:
     # Stands in for the child processes: the jobs run here when the build waits for them.
     def wait(self):
         steps["at_wait"] = held()
-        run_job("pyramid")
-        steps["pyramid"] = held()
         run_job("cast")
         steps["cast"] = held()
-        return [0, 0]
+        return [0]
 
     def stop(self):
         steps["stopped"] = True
 
 build_sample_site(sys.argv[1], warmers=InProcessWarmers())
 steps["build"] = held()
+# What a cold console casts before its warm-up is done: footprints (/api/sensors), a
+# geolocation of every hit, and an all-hits cast with more hits than the first pass keeps.
+site = load_site(sys.argv[1])
+with raycast.light_kernels():
+    for sensor in site.sensors.values():
+        footprint(sensor.camera, site.dem.ray_caster(), site.frame)
+        site.geolocator().geolocate(sensor.camera, [640.0, 100.0], [500.0, 400.0], rule="all")
+    zig = np.tile(np.array([0.0, 10.0], np.float32), 8)
+    teeth = Dem(GridSpec(0.0, 2.0, 1.0, 2, 16), np.vstack([zig, zig]))
+    hits = raycast.cast_rays(teeth, np.array([[0.5, 1.0, 5.0]]), np.array([[1.0, 0.0, 0.0]]))
+    steps["teeth_hits"] = int(hits.counts[0])
+steps["light_session"] = held()
+run_job("pyramid")
+steps["pyramid"] = held()
+raycast.use_light_kernels(True)
+run_job("server")
+steps["server"] = held()
+steps["light_after_server"] = raycast.light_kernels_on()
 print(json.dumps(steps))
 """
 
@@ -75,21 +99,39 @@ def test_the_build_compiles_nothing_after_the_jobs(steps):
 
 def test_each_job_compiles_its_share(steps):
     # The probe can see a kernel being added: each job adds the ones it owns.
-    pyr = _added(steps["start"], steps["pyramid"])
-    cast = _added(steps["pyramid"], steps["cast"])
-    assert "raycast_kernels.build_pyramid_kernel" in pyr
-    assert "raycast_kernels.cast_kernel" not in pyr
-    assert {"raycast_kernels.cast_kernel", "camera._undistort_kernel"} <= set(cast)
-    assert "raycast_kernels.build_pyramid_kernel" not in cast
+    cast = _added(steps["start"], steps["cast"])
+    pyr = _added(steps["light_session"], steps["pyramid"])
+    # The build renders with the light kernels and a numpy pyramid: no fast kernel.
+    assert set(cast) == {
+        "camera._undistort_kernel",
+        "raycast_kernels.check_rays_kernel",
+        "raycast_kernels.gather_hits_kernel",
+        "raycast_light_kernels.cast_kernel_light",
+    }
+    assert set(pyr) == {"raycast_kernels.build_pyramid_kernel"}
     # One specialisation per kernel.
     assert all(len(v) == 1 for v in steps["build"].values() if v)
 
 
+def test_a_cold_console_casts_with_what_the_jobs_compiled(steps):
+    # Footprints, geolocation and many-hit re-casts: nothing more compiles with light kernels.
+    assert steps["teeth_hits"] == 8
+    assert _added(steps["build"], steps["light_session"]) == {}
+
+
+def test_the_server_job_compiles_the_fast_kernels_and_switches_to_them(steps):
+    server = _added(steps["pyramid"], steps["server"])
+    assert {"raycast_kernels.cast_kernel", "raycast_kernels.cast_all_refill_kernel"} <= set(server)
+    assert not steps["light_after_server"]
+    angular = {k for k, v in steps["server"].items() if k.startswith("angular_kernels.") and v}
+    assert angular == {"angular_kernels.origin_runs_kernel"}  # the run detector only
+
+
 def test_no_angular_index_kernel_is_compiled(steps):
-    held = steps["build"]
+    held = steps["light_session"]
     angular = {k: v for k, v in held.items() if k.startswith("angular_kernels.") and v}
-    # The run detector is the only angular-module kernel on this path (every server cast).
-    assert set(angular) == {"angular_kernels.origin_runs_kernel"}
+    # Light casts do not even look for runs of one origin.
+    assert angular == {}
 
 
 def test_a_refused_build_stops_the_warmers(tmp_path):
