@@ -44,6 +44,7 @@ exactly one reason, checked in this order:
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import json
 import math
@@ -303,7 +304,7 @@ def read_detections_csv(
                 col.n_records += 1
                 col.skip(line, "malformed", f"{len(row)} fields, header has {len(header)}")
                 continue
-            col.offer(line, lambda row=row: _csv_record(row, pos))
+            col.offer(line, functools.partial(_csv_record, row, pos))
     return col.result()
 
 
@@ -341,7 +342,7 @@ def read_detections_jsonl(
     with _open(source, "r") as fh:
         for line_no, text in enumerate(fh, start=1):
             if text.strip():
-                col.offer(line_no, lambda text=text: _json_record(text))
+                col.offer(line_no, functools.partial(_json_record, text))
     return col.result()
 
 
@@ -359,7 +360,7 @@ def read_detection_records(
     """
     col = _Collector(sensors, max_examples, edge_tolerance_px)
     for line_no, obj in enumerate(records, start=1):
-        col.offer(line_no, lambda obj=obj: _object_record(obj))
+        col.offer(line_no, functools.partial(_object_record, obj))
     return col.result()
 
 

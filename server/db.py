@@ -282,16 +282,14 @@ class Store:
                         "SELECT id, report FROM batches WHERE batch_key = ?", (batch_key,)
                     ).fetchone()
                     if row is not None:
-                        ids = [
-                            r[0]
+                        known = tuple(
+                            int(r[0])
                             for r in c.execute(
                                 "SELECT id FROM detections WHERE batch_id = ? ORDER BY id",
                                 (row[0],),
                             )
-                        ]
-                        out.append(
-                            StoredBatch(row[0], tuple(ids), json.loads(row[1]), duplicate=True)
                         )
+                        out.append(StoredBatch(row[0], known, json.loads(row[1]), duplicate=True))
                         continue
                 detections, report = make()
                 cur = c.execute(

@@ -180,7 +180,7 @@ def scenario_copies(
     from demtrack.samplesite.scenarios import ScenarioParams, make_scenario
 
     made = []
-    params = ScenarioParams(**({} if rate_hz is None else {"rate_hz": rate_hz}))
+    params = ScenarioParams() if rate_hz is None else ScenarioParams(rate_hz=rate_hz)
     for name in names:
         made.append(
             (name, [make_scenario(site, name, replace(params, seed=k)) for k in range(copies)])
