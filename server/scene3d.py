@@ -355,6 +355,8 @@ class Scene3D:
         self._dirty_rays = False
         self._dirty_tracks: set[int] = set()
         self._follow: int | None = None
+        #: The latest follow choice asked for (the scene thread applies it on its next pass).
+        self._follow_asked: int | None = None
         self._follow_target: np.ndarray | None = None  # look-at point last aimed at
         self._follow_offset: np.ndarray | None = None  # for cameras that start following
         self._aim_lock = threading.Lock()
@@ -384,6 +386,7 @@ class Scene3D:
             scene has not been sent yet (it only sees the stream since it started).
             Later ``track_update`` messages keep it current.
         """
+        self._follow_asked = None if track_id is None else int(track_id)
         self._inbox.append({"type": "_follow", "track_id": track_id, "track": track})
         self._wake.set()
 
@@ -393,9 +396,11 @@ class Scene3D:
         Returns
         -------
         dict
-            ``track_id`` (or None), ``look_at_enu`` (the followed track's newest point, site
-            frame m, or None before it has one), ``clients``: ``[{id, look_at_enu,
-            position_enu}]`` as each connected viser client last reported or was sent.
+            ``track_id`` (or None; the latest choice asked for, reported at once while the
+            scene applies it on its next pass), ``look_at_enu`` (the followed track's
+            newest point, site frame m, or None before it has one), ``clients``:
+            ``[{id, look_at_enu, position_enu}]`` as each connected viser client last
+            reported or was sent.
         """
         target = self._follow_target
         clients = []
@@ -409,7 +414,7 @@ class Scene3D:
                 }
             )
         return {
-            "track_id": self._follow,
+            "track_id": self._follow_asked,  # the choice as asked: read-your-writes
             "look_at_enu": None if target is None else [float(x) for x in target],
             "clients": clients,
         }
