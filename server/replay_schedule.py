@@ -117,20 +117,21 @@ def stagger_offsets(
     placed: list[np.ndarray] = []
     out = []
     for paths, period in zip(truths, periods_s, strict=True):
-        best: tuple[int, list[float]] | None = None
+        best: tuple[int, list[float], list[np.ndarray]] | None = None
         for i in range(candidates):
             offs = [
                 round((k + i / candidates) * period / copies * rate_hz) / rate_hz
                 for k in range(copies)
             ]
-            run = _longest_close(_positions(paths, offs, period, t), placed, min_gap_m)
+            mine = _positions(paths, offs, period, t)
+            run = _longest_close(mine, placed, min_gap_m)
             if best is None or run < best[0]:
-                best = (run, offs)
+                best = (run, offs, mine)
             if run == 0:
                 break
         assert best is not None
         out.append(best[1])
-        placed += _positions(paths, best[1], period, t)
+        placed += best[2]  # the chosen phase's positions, already computed
     return out
 
 
