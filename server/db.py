@@ -24,7 +24,6 @@ Tables
 
 from __future__ import annotations
 
-import json
 import sqlite3
 import threading
 from collections.abc import Callable, Iterable, Sequence
@@ -43,6 +42,7 @@ __all__ = [
     "StoredBatch",
     "connect",
     "dumps_json",
+    "loads_json",
     "migrate",
 ]
 
@@ -187,6 +187,7 @@ class StoredBatch:
 
 
 _ENCODER = msgspec.json.Encoder()
+_DECODER = msgspec.json.Decoder()
 
 
 def dumps_json(obj: Any) -> str:
@@ -198,6 +199,16 @@ def dumps_json(obj: Any) -> str:
     the server's numbers are finite by construction).
     """
     return _ENCODER.encode(obj).decode()
+
+
+def loads_json(text: str | bytes) -> Any:
+    """Parse a stored body (msgspec's decoder: the values :func:`json.loads` gives, ~3.5x faster).
+
+    Stored track bodies are read back on every track, synopsis and export request; with
+    :func:`json.loads` their decoding was the largest single cost of the console server
+    under a live replay.
+    """
+    return _DECODER.decode(text)
 
 
 def _next_id(c: sqlite3.Connection, sql: str) -> int:
@@ -289,7 +300,7 @@ class Store:
                                 (row[0],),
                             )
                         )
-                        out.append(StoredBatch(row[0], known, json.loads(row[1]), duplicate=True))
+                        out.append(StoredBatch(row[0], known, loads_json(row[1]), duplicate=True))
                         continue
                 detections, report = make()
                 cur = c.execute(
@@ -504,14 +515,14 @@ class Store:
             "SELECT body FROM fixes WHERE detection_id > ? ORDER BY detection_id LIMIT ?",
             (after_id, limit),
         )
-        return [json.loads(r[0]) for r in rows]
+        return [loads_json(r[0]) for r in rows]
 
     def events_since(self, seq: int, limit: int = 1000) -> list[dict[str, Any]]:
         """Stream messages with ``seq > seq``, oldest first, ``seq`` filled in."""
         rows = self._rows(
             "SELECT seq, payload FROM events WHERE seq > ? ORDER BY seq LIMIT ?", (seq, limit)
         )
-        return [{**json.loads(p), "seq": int(s)} for s, p in rows]
+        return [{**loads_json(p), "seq": int(s)} for s, p in rows]
 
     def tracks(
         self,
@@ -542,7 +553,14 @@ class Store:
             params += list(bbox)
         where = " WHERE " + " AND ".join(clauses) if clauses else ""
         rows = self._rows(f"SELECT body FROM tracks{where} ORDER BY id", params)  # noqa: S608
-        return [json.loads(r[0]) for r in rows]
+        return [loads_json(r[0]) for r in rows]
+
+    def track(self, track_id: int) -> dict[str, Any] | None:
+        """The body of track ``track_id`` (None if there is none), by its primary key."""
+        if not -(2**63) <= int(track_id) < 2**63:  # beyond SQLite's integers: no such track
+            return None
+        rows = self._rows("SELECT body FROM tracks WHERE id = ?", (int(track_id),))
+        return loads_json(rows[0][0]) if rows else None
 
     def activity(
         self,
@@ -572,7 +590,7 @@ class Store:
             f"SELECT body FROM activity{where} ORDER BY t_start, id LIMIT ?",  # noqa: S608
             [*params, limit],
         )
-        return [json.loads(r[0]) for r in rows]
+        return [loads_json(r[0]) for r in rows]
 
     def latest_activity(self, kind: str) -> list[dict[str, Any]]:
         """The newest event body of ``kind`` per first track id."""
@@ -581,4 +599,4 @@ class Store:
             " WHERE kind = ? GROUP BY json_extract(track_ids, '$[0]'))",
             (kind,),
         )
-        return [json.loads(r[0]) for r in rows]
+        return [loads_json(r[0]) for r in rows]

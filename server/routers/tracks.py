@@ -220,7 +220,7 @@ async def export_tracks(
 @router.get("/{track_id}", response_model=TracksOut, summary="One track")
 def get_track(track_id: int, state: StateDep) -> dict[str, Any]:
     """One track with all its points."""
-    found = [b for b in state.store.tracks() if b["id"] == track_id]
-    if not found:
+    body = state.store.track(track_id)
+    if body is None:
         raise HTTPException(404, f"no track {track_id}")
-    return {"tracks": found}
+    return {"tracks": [body]}

@@ -113,3 +113,21 @@ def test_walking_object_becomes_a_track_with_filters(client):
         r = client.get(f"/api/tracks?{q}", headers=AUTH)
         assert r.status_code == 422, q
     assert client.get("/api/tracks/999", headers=AUTH).status_code == 404
+    assert client.get(f"/api/tracks/{2**70}", headers=AUTH).status_code == 404
+    assert client.get(f"/api/tracks/{-(2**70)}", headers=AUTH).status_code == 404
+
+
+def test_one_track_by_id_is_the_listed_body(client):
+    """``Store.track`` (one row by key) gives exactly the body ``Store.tracks`` lists."""
+    from demtrack.server.db import dumps_json, loads_json
+
+    post(client, walk(n=30, t0=0.0))
+    post(client, walk(sensor="cam2", n=30, t0=100.0, u0=300, v=600, cls="human"))
+    store = client.app.state.console.store
+    listed = store.tracks()
+    assert listed, "the walk made no track"
+    for body in listed:
+        assert store.track(body["id"]) == body
+    assert store.track(10**6) is None
+    sample = {"a": [1, 2.5, None, "x"], "b": {"c": -3e-9}}
+    assert loads_json(dumps_json(sample)) == sample
