@@ -79,6 +79,7 @@ def serve_app(
         port=port,
         log_level=log_level,
         ws_max_size=max(settings.max_ws_message_bytes * 2, 1 << 20),
+        ws_per_message_deflate=settings.ws_compression,
         timeout_graceful_shutdown=5,
     )
     server = uvicorn.Server(config)

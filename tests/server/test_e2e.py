@@ -3,6 +3,7 @@ and the tracks are those an uninterrupted run makes."""
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
@@ -20,8 +21,8 @@ from starlette.testclient import TestClient
 pytestmark = pytest.mark.timeout(120)
 
 
-def start(site: Path, db: Path) -> tuple[subprocess.Popen, str]:
-    env = {**os.environ, "DEMTRACK_TOKEN": TOKEN}
+def start(site: Path, db: Path, **extra_env: str) -> tuple[subprocess.Popen, str]:
+    env = {**os.environ, "DEMTRACK_TOKEN": TOKEN, **extra_env}
     proc = subprocess.Popen(
         [
             sys.executable,
@@ -136,3 +137,21 @@ def test_sigkill_mid_ingest_loses_no_acknowledged_detection(sample_site_dir, tmp
             "accepted"
         ] == len(recs)
         assert ref.get("/api/tracks", headers=AUTH).json()["tracks"] == tracks
+
+
+@pytest.mark.parametrize("setting", [None, "true"])
+def test_websocket_compression_is_offered_only_when_set(sample_site_dir, tmp_path, setting):
+    """permessage-deflate costs one compression per client per message: off by default."""
+    from websockets.sync.client import connect
+
+    extra = {} if setting is None else {"DEMTRACK_WS_COMPRESSION": setting}
+    proc, url = start(sample_site_dir, tmp_path / "c.sqlite3", **extra)
+    try:
+        ws_url = url.replace("http://", "ws://") + "/ws"
+        with connect(ws_url, additional_headers=AUTH, compression="deflate") as ws:
+            offered = ws.response.headers.get("Sec-WebSocket-Extensions") or ""
+            assert ("permessage-deflate" in offered) == (setting is not None)
+            assert "type" in json.loads(ws.recv(timeout=10))
+    finally:
+        proc.kill()
+        proc.wait(10)
