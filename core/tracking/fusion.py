@@ -24,6 +24,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from .config import TrackerConfig
+from .fusion_kernels import screen_pairs_kernel, triangulation_cov_kernel
 from .protocols import Measurement
 from .types import Fix
 
@@ -317,11 +318,7 @@ def fuse_measurements(
                 continue
             fa = [measurements[i].fix for i in left]
             fb = [measurements[j].fix for j in right]
-            if len(fa) * len(fb) <= _SCALAR_PAIRS:
-                pairs = _pair_scalar(fa, fb, config)
-            else:
-                pairs = _pair_vectorised(fa, fb, config)
-            for r, c, tri in pairs:
+            for r, c, tri in _pair_vectorised(fa, fb, config):
                 i, j = left[r], right[c]
                 used.update((i, j))
                 mi, mj = measurements[i], measurements[j]
@@ -330,16 +327,14 @@ def fuse_measurements(
     return fused + [m for i, m in enumerate(measurements) if i not in used]
 
 
-#: Up to this many (a, b) pairs a sensor pair is fused pair by pair (less overhead).
-_SCALAR_PAIRS = 4
-
-
 def _pair_scalar(
     fa: Sequence[Fix], fb: Sequence[Fix], config: TrackerConfig
 ) -> list[tuple[int, int, tuple[Fix, float]]]:
     """Matched ``(row, col, (fused fix, miss))``: every pair triangulated, then assigned.
 
-    The assignment minimises the total :func:`pair_cost`.
+    The assignment minimises the total :func:`pair_cost`. The pair-by-pair reference of
+    :func:`_pair_vectorised` (which the fusion uses: with the compiled screen it is the
+    faster one even for a single pair).
     """
     cost = np.full((len(fa), len(fb)), np.inf)
     cand: dict[tuple[int, int], tuple[Fix, float]] = {}
@@ -408,19 +403,6 @@ def _padded_hits(fixes: Sequence[Fix]) -> tuple[np.ndarray, np.ndarray, np.ndarr
     return xy, sig, cov
 
 
-def _padded_d2(hits_xy: np.ndarray, hits_cov: np.ndarray, p_enu: np.ndarray) -> np.ndarray:
-    """:func:`_hit_d2` of the points ``p_enu`` (na, nb, 3) against NaN-padded hits.
-
-    ``hits_xy`` (.., k, 2) and ``hits_cov`` (.., k, 2, 2) broadcast against (na, nb);
-    padding is skipped (inf where a fix has no hit).
-    """
-    d = hits_xy - p_enu[:, :, None, :2]
-    a, b, c = hits_cov[..., 0, 0], hits_cov[..., 0, 1], hits_cov[..., 1, 1]
-    det = a * c - b * b
-    d2 = (c * d[..., 0] ** 2 - 2 * b * d[..., 0] * d[..., 1] + a * d[..., 1] ** 2) / det
-    return np.min(np.where(np.isnan(d2), np.inf, d2), axis=-1)
-
-
 @dataclass(frozen=True, eq=False)
 class _Screen:
     """What :func:`_screen_pairs` finds for the (a, b) pairs of a sensor pair.
@@ -454,45 +436,17 @@ def _screen_pairs(fa: Sequence[Fix], fb: Sequence[Fix], config: TrackerConfig) -
     db = np.array([f.direction_enu for f in fb])
     ta = np.array([f.t_s for f in fa])
     tb = np.array([f.t_s for f in fb])
-    ca = np.array([f.cls for f in fa])
-    cb = np.array([f.cls for f in fb])
-    same = (ca[:, None] == cb[None, :]) & (
-        np.abs(ta[:, None] - tb[None, :]) <= config.step_window_s
-    )
-    b = da @ db.T
-    denom = 1.0 - b * b
-    with np.errstate(divide="ignore", invalid="ignore"):
-        w0 = oa[:, None, :] - ob[None, :, :]
-        d = np.einsum("ik,ijk->ij", da, w0)
-        e = np.einsum("jk,ijk->ij", db, w0)
-        s = (b * e - d) / denom
-        t = (e - b * d) / denom
-        pa = oa[:, None, :] + s[..., None] * da[:, None, :]
-        pb = ob[None, :, :] + t[..., None] * db[None, :, :]
-        p = 0.5 * (pa + pb)
-        miss = np.linalg.norm(pa - pb, axis=-1)
-        sin_angle = np.sin(np.arccos(np.clip(b, -1.0, 1.0)))
-        gate = config.fusion_hit_gate_sigma
-        hxa, sga, cva = _padded_hits(fa)
-        hxb, sgb, cvb = _padded_hits(fb)
-        dist_a = np.linalg.norm(hxa[:, None, :, :] - p[:, :, None, :2], axis=-1)
-        dist_b = np.linalg.norm(hxb[None, :, :, :] - p[:, :, None, :2], axis=-1)
-        near_a = np.nanmax(gate * sga[:, None, :] + 1.0 - dist_a, axis=-1, initial=-np.inf)
-        near_b = np.nanmax(gate * sgb[None, :, :] + 1.0 - dist_b, axis=-1, initial=-np.inf)
-        slack = np.stack(
-            [
-                denom - 1e-12,
-                sin_angle - math.sin(math.radians(config.fusion_min_angle_deg)),
-                config.fusion_max_miss_m - miss,
-                s,
-                t,
-                near_a,
-                near_b,
-            ]
-        )
-        d2 = _padded_d2(hxa[:, None], cva[:, None], p) + _padded_d2(hxb[None], cvb[None], p)
-    slack = np.where(np.isnan(slack), -np.inf, slack)
-    worst = slack.min(axis=0)
+    codes = {c: k for k, c in enumerate(sorted({f.cls for f in (*fa, *fb)}))}
+    ca = np.array([codes[f.cls] for f in fa], dtype=np.int64)
+    cb = np.array([codes[f.cls] for f in fb], dtype=np.int64)
+    hxa, sga, cva = _padded_hits(fa)
+    hxb, sgb, cvb = _padded_hits(fb)
+    min_sin = math.sin(math.radians(config.fusion_min_angle_deg))
+    same, worst, d2, p, miss, s, t, sin_angle = screen_pairs_kernel(
+        oa, da, ta, ca, hxa, sga, cva, ob, db, tb, cb, hxb, sgb, cvb,
+        float(config.step_window_s), min_sin, float(config.fusion_max_miss_m),
+        float(config.fusion_hit_gate_sigma),
+    )  # fmt: skip
     clear = same & (worst > _SCREEN_TOL)
     cost = np.where(clear, d2, np.inf)
     for r, c in zip(*np.nonzero(same & (np.abs(worst) <= _SCREEN_TOL)), strict=True):
@@ -519,34 +473,14 @@ def _triangulate_screened(
         return []
     p = screen.p_enu[rows, cols]
     miss = screen.miss[rows, cols]
-    sin_angle = screen.sin_angle[rows, cols]
-    sa = config.ray_sigma_rad * screen.range_a[rows, cols]
-    sb = config.ray_sigma_rad * screen.range_b[rows, cols]
-    worst = np.sqrt(0.5 * (sa * sa + sb * sb)) / sin_angle
-    info = np.eye(2)[None] / (worst * worst)[:, None, None]
-    for side, fixes, idx, s in (("a", fa, rows, sa), ("b", fb, cols, sb)):
-        g = np.array([fixes[i].direction_enu[:2] for i in idx.tolist()])
-        norm = np.hypot(g[:, 0], g[:, 1])
-        vertical = norm < 1e-9
-        n = np.where(
-            vertical[:, None],
-            np.array([1.0, 0.0]),
-            np.stack([-g[:, 1], g[:, 0]], axis=1) / np.where(vertical, 1.0, norm)[:, None],
-        )
-        hits_xy, hits_cov = screen.hits_a if side == "a" else screen.hits_b
-        d2 = np.sum((hits_xy[idx] - p[:, None, :2]) ** 2, axis=2)
-        j = np.argmin(np.where(np.isnan(d2), np.inf, d2), axis=1)
-        c = hits_cov[idx, j]
-        var = np.einsum("ki,kij,kj->k", n, c, n)
-        s = np.maximum(s, np.sqrt(var))
-        nn = n[:, :, None] * n[:, None, :]
-        info += np.where(vertical[:, None, None], np.eye(2)[None], nn) / (s * s)[:, None, None]
-    cov = np.linalg.inv(info)
-    cov = 0.5 * (cov + np.swapaxes(cov, 1, 2))
-    cov += (np.maximum(0.5 * miss, 0.05) ** 2)[:, None, None] * np.eye(2)[None]
-    half_tr = 0.5 * (cov[:, 0, 0] + cov[:, 1, 1])
-    half_diff = 0.5 * (cov[:, 0, 0] - cov[:, 1, 1])
-    sigma = np.sqrt(half_tr + np.hypot(half_diff, cov[:, 0, 1]))
+    ga = np.array([fa[i].direction_enu[:2] for i in rows.tolist()])
+    gb = np.array([fb[j].direction_enu[:2] for j in cols.tolist()])
+    (hxa, cva), (hxb, cvb) = screen.hits_a, screen.hits_b
+    cov, sigma = triangulation_cov_kernel(
+        p, miss, screen.sin_angle[rows, cols], screen.range_a[rows, cols],
+        screen.range_b[rows, cols], ga, gb, hxa[rows], cva[rows], hxb[cols], cvb[cols],
+        float(config.ray_sigma_rad),
+    )  # fmt: skip
     out = []
     for k, (r, c) in enumerate(zip(rows.tolist(), cols.tolist(), strict=True)):
         a, b = fa[r], fb[c]

@@ -18,8 +18,9 @@ the build meanwhile scans the world and grids the DEM and orthophoto, then waits
     The min/max pyramid kernel alone (the ``server`` job compiles it too).
 ``server``
     The fast kernels the console server's start-up warm-up loads (``cast_kernel``, the
-    all-hits re-walk, the pyramid, the run detector); started with ``cast`` at the lowest
-    CPU priority, so it takes only the CPU the build and the server's start leave.
+    all-hits re-walk, the pyramid, the run detector, the tracker's fusion kernels);
+    started with ``cast`` at the lowest CPU priority, so it takes only the CPU the build
+    and the server's start leave.
 
 The angular-index kernels are never compiled here. Each job compiles exactly the
 specialisations the build and the server use (the same dtypes, layouts and read-only
@@ -87,9 +88,11 @@ def _job_server() -> None:
 
     from demtrack.core.camera import undistort_normalized_nb
     from demtrack.core.raycast import warm_up
+    from demtrack.core.tracking.fusion_kernels import warm_up as warm_fusion
 
     warm_up(angular=False)  # what server.app warms at start-up, angular index excluded
     undistort_normalized_nb(np.array([0.1]), np.array([0.1]), -0.04, 0.0, 0.0, 0.0, 0.0)
+    warm_fusion()
 
 
 _JOB_FUNCS = {"cast": _job_cast, "pyramid": _job_pyramid, "server": _job_server}
