@@ -88,6 +88,7 @@ class RoadNetwork:
     _segments: np.ndarray = field(init=False, repr=False)
     _segment_road: np.ndarray = field(init=False, repr=False)
     _segment_tree: STRtree = field(init=False, repr=False)
+    _segment_xy: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         lines = tuple(self.lines)
@@ -111,7 +112,9 @@ class RoadNetwork:
         xy, owner = shapely.get_coordinates(np.asarray(lines, dtype=object), return_index=True)
         same = owner[1:] == owner[:-1]
         starts = np.flatnonzero(same)
-        segments = shapely.linestrings(np.stack([xy[starts], xy[starts + 1]], axis=1))
+        seg_xy = np.stack([xy[starts], xy[starts + 1]], axis=1)
+        segments = shapely.linestrings(seg_xy)
+        object.__setattr__(self, "_segment_xy", seg_xy.reshape(-1, 2, 2))
         object.__setattr__(self, "_segments", np.asarray(segments, dtype=object).reshape(-1))
         object.__setattr__(self, "_segment_road", owner[starts].astype(np.int64))
         object.__setattr__(self, "_segment_tree", STRtree(self._segments))
@@ -243,11 +246,12 @@ class RoadNetwork:
         rays = np.flatnonzero(horiz >= 1e-9)  # straight down: the ground track is a point
         end = o[rays] + d[rays] * cutoff_m
         tracks = shapely.linestrings(np.stack([o[rays, :2], end[:, :2]], axis=1))
-        pair_track, pair_seg = self._segment_tree.query(tracks, predicate="intersects")
+        pair_track, pair_seg = self._segment_tree.query(tracks)  # bounding boxes only
         if len(pair_track) == 0:
             return out
-        crossings = shapely.intersection(tracks[pair_track], self._segments[pair_seg])
-        xy, which = shapely.get_coordinates(crossings, return_index=True)
+        xy, which = self._crossings(o[rays[pair_track], :2], end[pair_track, :2], pair_seg)
+        if len(which) == 0:
+            return out
         ray = rays[pair_track[which]]
         road = self._segment_road[pair_seg[which]]
         x, y = xy[:, 0], xy[:, 1]
@@ -269,6 +273,38 @@ class RoadNetwork:
         out.vertical_gap_m[r] = gap[best]
         out.road_index[r] = road[best]
         return out
+
+    def _crossings(
+        self, start: np.ndarray, stop: np.ndarray, seg: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Where each track ``start -> stop`` (k, 2) meets road segment ``seg`` (k,).
+
+        Returns the crossing points (c, 2) and, for each, the index of its pair. Computed
+        in closed form (the two segments' parameters from 2-D cross products) instead of
+        GEOS's intersection of every candidate pair, which was most of the road rule's
+        time; parallel pairs (which can only overlap) go to shapely, as before, and give
+        the ends of their overlap.
+        """
+        a = self._segment_xy[seg, 0]
+        q = self._segment_xy[seg, 1] - a
+        r = stop - start
+        ap = a - start
+        denom = r[:, 0] * q[:, 1] - r[:, 1] * q[:, 0]
+        parallel = denom == 0.0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = (ap[:, 0] * q[:, 1] - ap[:, 1] * q[:, 0]) / denom
+            u = (ap[:, 0] * r[:, 1] - ap[:, 1] * r[:, 0]) / denom
+        crossing = ~parallel & (s >= 0.0) & (s <= 1.0) & (u >= 0.0) & (u <= 1.0)
+        which = np.flatnonzero(crossing)
+        xy = start[which] + s[which, None] * r[which]
+        pairs = np.flatnonzero(parallel)
+        if len(pairs):
+            tracks = shapely.linestrings(np.stack([start[pairs], stop[pairs]], axis=1))
+            overlap = shapely.intersection(tracks, self._segments[seg[pairs]])
+            more, k = shapely.get_coordinates(overlap, return_index=True)
+            xy = np.concatenate([xy, more])
+            which = np.concatenate([which, pairs[k]])
+        return xy, which
 
     def distance_m(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Horizontal distance (m) from each point to the nearest road centre line."""

@@ -216,3 +216,30 @@ def test_fixes_of_a_batch_equal_fixes_one_detection_at_a_time(site):
         assert (f.road_hit_enu is None) == (s.road_hit_enu is None)
         if f.road_hit_enu is not None:
             np.testing.assert_allclose(f.road_hit_enu, s.road_hit_enu, rtol=0, atol=1e-9)
+
+
+def test_bulk_road_rule_with_a_track_along_a_road_and_through_a_vertex(site):
+    """Collinear ground tracks (overlap) and crossings at a vertex, as the scalar rule."""
+    dem = site.dem
+    x0, y0 = dem.grid.x_min + 100.0, dem.grid.y_max - 100.0
+    net = RoadNetwork(
+        (
+            shapely.LineString([(x0, y0), (x0 + 60, y0), (x0 + 60, y0 + 40)]),
+            shapely.LineString([(x0 - 20, y0 - 30), (x0 + 10, y0 + 30)]),
+        )
+    )
+    z = float(dem.sample(np.array([x0]), np.array([y0]))[0])
+    o = np.array(
+        [
+            [x0 - 30.0, y0, z + 20.0],  # along the first road's first segment
+            [x0 + 40.0, y0 - 20.0, z + 30.0],  # through the vertex (x0 + 60, y0)
+            [x0 - 50.0, y0 + 10.0, z + 25.0],  # across both roads
+        ]
+    )
+    d = np.array([[1.0, 0.0, -0.1], [20.0, 20.0, -3.0], [1.0, -0.05, -0.05]])
+    got = net.best_candidates(o, d, dem, 200.0)
+    for i in range(len(o)):
+        want = net.best_candidate(o[i], d[i], dem, 200.0)
+        assert want is not None and got.found[i]
+        np.testing.assert_allclose(got.p_enu[i], want.p_enu, rtol=0, atol=1e-9)
+        assert got.road_index[i] == want.road_index
