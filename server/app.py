@@ -29,7 +29,7 @@ from demtrack.core.errors import DemtrackError, SiteError
 from demtrack.core.raycast import warm_up
 from demtrack.core.site import Site, load_site
 from demtrack.core.tracking import METHODS
-from demtrack.core.tracking.fusion_kernels import warm_up as warm_fusion
+from demtrack.core.tracking.warm import warm_up as warm_tracker
 
 from .db import Store
 from .hub import Hub
@@ -112,7 +112,7 @@ def _warm_kernels(done: threading.Event, after: Any = None) -> None:
             after()
         warm_up(angular=False)  # requests cast small batches: the pyramid walk only
         undistort_normalized_nb(np.array([0.1]), np.array([0.1]), -0.04, 0.0, 0.0, 0.0, 0.0)
-        warm_fusion()  # the live tracker's two-ray fusion
+        warm_tracker()  # the live tracker's fusion and Kalman kernels
         log.info("ray-casting kernels ready in %.1f s", time.perf_counter() - t0)
     except Exception:  # noqa: BLE001 - a failed warm-up only costs the first request time
         log.exception("kernel warm-up failed")

@@ -19,7 +19,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["screen_pairs_kernel", "triangulation_cov_kernel", "warm_up"]
+__all__ = ["screen_pairs_kernel", "triangulation_cov_kernel"]
 
 
 @njit(cache=True, error_model="numpy")
@@ -192,22 +192,3 @@ def triangulation_cov_kernel(  # pragma: no cover - numba
         half_diff = 0.5 * (c00 - c11)
         sigma[r] = math.sqrt(half_tr + math.hypot(half_diff, c01))
     return cov, sigma
-
-
-def warm_up() -> None:
-    """Compile (or load from numba's cache) both kernels with the fusion's argument types.
-
-    About 5 s of CPU cold; the server's start-up warm-up calls it so the live tracker's
-    first fused pair does not wait for it.
-    """
-    o = np.zeros((1, 3))
-    d = np.array([[0.0, 0.0, -1.0]])
-    t = np.zeros(1)
-    c = np.zeros(1, np.int64)
-    hx = np.zeros((1, 1, 2))
-    sg = np.ones((1, 1))
-    cv = np.eye(2)[None, None].copy()
-    screen_pairs_kernel(o, d, t, c, hx, sg, cv, o, d, t, c, hx, sg, cv, 0.1, 0.1, 2.0, 3.0)
-    one = np.ones(1)
-    g = np.ones((1, 2))
-    triangulation_cov_kernel(o, one, one, one, one, g, g, hx, cv, hx, cv, 0.002)

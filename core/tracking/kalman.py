@@ -15,14 +15,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from .hypothesiser import mahalanobis2
+from .kalman_kernels import (
+    predict_kernel,
+    rts_positions_kernel,
+    smoother_gain_kernel,
+    update_kernel,
+)
 from .protocols import Candidates, MotionModel
 
 __all__ = ["GaussianState", "KalmanFilter"]
-
-_H = np.hstack([np.eye(2), np.zeros((2, 2))])
-_I4 = np.eye(4)
-_I4.setflags(write=False)
-_H.setflags(write=False)
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,16 +62,9 @@ class GaussianState:
 def _kalman(x: np.ndarray, p: np.ndarray, z_xy: np.ndarray, r: np.ndarray) -> tuple:
     """One linear update with measurement covariance ``r`` (2, 2); returns (x, P).
 
-    Joseph form keeps P symmetric positive.
+    Joseph form keeps P symmetric positive (:func:`~.kalman_kernels.update_kernel`).
     """
-    s = p[:2, :2] + r  # H P H^T + R, H picking the position
-    det = s[0, 0] * s[1, 1] - s[0, 1] * s[1, 0]
-    s_inv = np.array([[s[1, 1], -s[0, 1]], [-s[1, 0], s[0, 0]]]) / det
-    k = (s_inv @ p[:2, :]).T  # P H^T S^-1 (S symmetric): the 2 x 2 inverse in closed form
-    x_new = x + k @ (z_xy - x[:2])
-    ikh = _I4 - k @ _H
-    p_new = ikh @ p @ ikh.T + k @ r @ k.T
-    return x_new, 0.5 * (p_new + p_new.T)
+    return update_kernel(x, p, z_xy, r)
 
 
 @dataclass(frozen=True)
@@ -111,9 +105,7 @@ class KalmanFilter:
         t_k, _, p_k = entry
         dt = t_next - t_k
         f = self.motion.transition(dt)
-        p_pred = f @ p_k @ f.T + self.motion.covariance(dt)
-        gain = np.linalg.solve(p_pred, f @ p_k).T  # P_k F^T P_pred^-1
-        return f, gain
+        return f, smoother_gain_kernel(p_k, f, self.motion.covariance(dt))
 
     def initiate(
         self, cands: Candidates, which: int | None, t_s: float, rng: np.random.Generator
@@ -137,11 +129,10 @@ class KalmanFilter:
         dt = max(0.0, t_s - state.t_s)
         if dt == 0.0:
             return state
-        f = self.motion.transition(dt)
-        p = f @ state.P @ f.T + self.motion.covariance(dt)
-        return GaussianState(
-            t_s, f @ state.x, 0.5 * (p + p.T), state.z_m, state.history, state.gains
+        x, p = predict_kernel(
+            state.x, state.P, self.motion.transition(dt), self.motion.covariance(dt)
         )
+        return GaussianState(t_s, x, p, state.z_m, state.history, state.gains)
 
     def gaussian(self, state: GaussianState) -> tuple[np.ndarray, np.ndarray]:
         """Horizontal position mean (2,) and covariance (2, 2)."""
@@ -199,12 +190,12 @@ class KalmanFilter:
             steps = tuple(
                 self._smoother_step(hist[k], hist[k + 1][0]) for k in range(len(hist) - 1)
             )
-        xs = hist[-1][1]
-        out = [xs[:2].copy()]
-        for (_, x_k, _), (f, gain) in zip(reversed(hist[:-1]), reversed(steps), strict=True):
-            xs = x_k + gain @ (xs - f @ x_k)
-            out.append(xs[:2].copy())
-        return out[::-1]
+        if len(hist) == 1:
+            return [hist[0][1][:2].copy()]
+        xs = np.array([h[1] for h in hist])
+        fs = np.array([f for f, _ in steps])
+        gains = np.array([g for _, g in steps])
+        return list(rts_positions_kernel(xs, fs, gains))
 
     def density(self, state: GaussianState, xy: np.ndarray, cov_xy: np.ndarray) -> float:
         """Predictive density (1/m^2) of a position ``xy`` (2,) known to ``cov_xy`` (2, 2)."""

@@ -18,7 +18,7 @@ the build meanwhile scans the world and grids the DEM and orthophoto, then waits
     The min/max pyramid kernel alone (the ``server`` job compiles it too).
 ``server``
     The fast kernels the console server's start-up warm-up loads (``cast_kernel``, the
-    all-hits re-walk, the pyramid, the run detector, the tracker's fusion kernels);
+    all-hits re-walk, the pyramid, the run detector, the tracker's fusion and Kalman kernels);
     started with ``cast`` at the lowest CPU priority, so it takes only the CPU the build
     and the server's start leave.
 
@@ -88,11 +88,11 @@ def _job_server() -> None:
 
     from demtrack.core.camera import undistort_normalized_nb
     from demtrack.core.raycast import warm_up
-    from demtrack.core.tracking.fusion_kernels import warm_up as warm_fusion
+    from demtrack.core.tracking.warm import warm_up as warm_tracker
 
     warm_up(angular=False)  # what server.app warms at start-up, angular index excluded
     undistort_normalized_nb(np.array([0.1]), np.array([0.1]), -0.04, 0.0, 0.0, 0.0, 0.0)
-    warm_fusion()
+    warm_tracker()
 
 
 _JOB_FUNCS = {"cast": _job_cast, "pyramid": _job_pyramid, "server": _job_server}

@@ -75,30 +75,3 @@ def test_triangulation_kernel_equals_the_numpy_twin(seed):
     np.testing.assert_allclose(sigma, sigma_ref, rtol=1e-9)
     assert (cov[:, 0, 1] == cov[:, 1, 0]).all()
     assert (np.linalg.eigvalsh(cov) > 0).all()
-
-
-def test_warm_up_compiles_what_the_fusion_calls():
-    """After ``warm_up`` a real fusion adds no specialisation (nothing compiles live)."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).parent))
-    from test_tracking_batched import _fix
-
-    from demtrack.core.tracking.config import TrackerConfig
-    from demtrack.core.tracking.fusion import fuse_measurements
-    from demtrack.core.tracking.fusion_kernels import warm_up
-    from demtrack.core.tracking.protocols import Measurement
-
-    warm_up()
-    kernels = (screen_pairs_kernel, triangulation_cov_kernel)
-    before = [len(k.signatures) for k in kernels]
-    rng = np.random.default_rng(5)
-    cam_a, cam_b = np.array([-150.0, 0.0, 20.0]), np.array([0.0, -180.0, 25.0])
-    target = np.array([10.0, 5.0, 0.0])
-    fixes = [_fix(rng, "a", cam_a, target), _fix(rng, "b", cam_b, target, idx=1)]
-    out = fuse_measurements(
-        [Measurement(f, (k,), (f.sensor,)) for k, f in enumerate(fixes)], TrackerConfig()
-    )
-    assert len(out) == 1 and len(out[0].indices) == 2
-    assert [len(k.signatures) for k in kernels] == before
