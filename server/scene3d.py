@@ -10,11 +10,24 @@ with every terrain hit marked (the newest ``max_rays`` rays are kept), the hit t
 tracker used highlighted, and each track as a coloured polyline.
 
 **Following a track.** :meth:`Scene3D.follow` (``PUT /api/scene3d/follow``, sent by the
-console when the operator selects a track) points every client's camera at the track's
-newest position and keeps it there as new points arrive: the camera keeps its offset from
-the look-at point (so an operator who orbits or zooms keeps that view), starting from
-:data:`FOLLOW_OFFSET_M` behind the track's recent heading. The followed track is drawn
-thick and yellow with a marker and its id at the head; ``follow(None)`` stops.
+console when the operator selects a track) points clients' cameras at the track's newest
+position and keeps them there as new points arrive: a camera keeps its offset from the
+look-at point (so an operator who orbits or zooms keeps that view), starting from
+:data:`FOLLOW_OFFSET_M` behind the track's recent heading. Followed tracks (of the broadcast
+and of sessions with a connected client) are drawn thick and yellow; each following client
+gets its own marker and the track's id at the head (client-scoped nodes). ``follow(None)``
+stops.
+
+**Follow sessions.** A console page is one operator's view: it makes up a session id and
+gives viser's client (the 3D tab's iframe) the WebSocket URL
+``ws://host:port/follow/<session>`` through viser's own ``?websocket=`` URL parameter. The
+viser server accepts a WebSocket on any path; the scene reads the path of each client's
+connection when it connects (:func:`session_of_path`), so every client of that page, and
+any client it reconnects with, belongs to its session. ``follow(id, session=s)`` moves the
+cameras of session ``s`` only; ``follow(id)`` without a session is the old broadcast: every
+client follows ``id`` and the sessions' own choices are dropped. A session's ``None``
+stops its clients only (it also shadows a broadcast choice). A client that connects while
+its session (or the broadcast) follows a track starts at the track's head.
 
 Everything is in the site frame (x east, y north, z up, m), which is viser's default
 ``+z`` up world. viser's frustums follow the OpenCV camera convention (x right, y down,
@@ -29,6 +42,7 @@ import contextlib
 import io
 import logging
 import math
+import re
 import threading
 from dataclasses import dataclass, field
 from typing import Any
@@ -42,6 +56,8 @@ from demtrack.core.site import Site
 
 __all__ = [
     "FOLLOW_OFFSET_M",
+    "FOLLOW_PATH",
+    "SESSION_PATTERN",
     "Scene3D",
     "follow_offset",
     "TerrainMesh",
@@ -49,6 +65,7 @@ __all__ = [
     "frustum_fov_aspect",
     "polyline_segments",
     "road_polylines",
+    "session_of_path",
     "terrain_mesh",
     "texture_uv",
     "track_colour",
@@ -81,6 +98,51 @@ _FOLLOW_COLOUR = (255, 230, 0)  # the console's selection colour
 #: Where a camera starts when it begins to follow: this far behind the track (m,
 #: horizontally) and this far above its newest point.
 FOLLOW_OFFSET_M = (60.0, 35.0)
+#: A follow session id (made up by a console page): URL-safe, 8 to 64 characters.
+SESSION_PATTERN = r"^[A-Za-z0-9_-]{8,64}$"
+#: The WebSocket path prefix a viser client joins a follow session with:
+#: ``ws://host:port/follow/<session>``.
+FOLLOW_PATH = "/follow/"
+#: Most sessions whose follow choice is kept (the oldest choice goes first).
+_MAX_SESSIONS = 256
+_SESSION_RE = re.compile(SESSION_PATTERN)
+
+
+def session_of_path(path: str | None) -> str | None:
+    """The follow session a viser client's WebSocket request path names.
+
+    Parameters
+    ----------
+    path : str or None
+        The request target, e.g. ``/follow/abcd1234?x=1`` (the query is ignored).
+
+    Returns
+    -------
+    str or None
+        The session id, or None for any other path (``/``, a malformed id).
+    """
+    if not path:
+        return None
+    p = path.partition("?")[0]
+    if not p.startswith(FOLLOW_PATH):
+        return None
+    sid = p[len(FOLLOW_PATH) :].rstrip("/")
+    return sid if _SESSION_RE.match(sid) else None
+
+
+def _websocket_path(server: Any, client_id: int) -> str | None:
+    """The request path of a viser client's WebSocket (None if it cannot be read).
+
+    viser 1.1 keeps each live ``websockets`` connection in its WebSocket server's
+    ``_live_connections`` (from before its connect callbacks run until after its
+    disconnect callbacks); this is the one private attribute the scene reads, and
+    ``tests/server/test_scene3d.py`` fails if a viser upgrade moves it.
+    """
+    try:
+        conn = server._websock_server._live_connections[client_id]
+        return str(conn.request.path)
+    except (AttributeError, KeyError, TypeError):
+        return None
 
 
 def wxyz_from_matrix(R: np.ndarray) -> np.ndarray:  # noqa: N803 - a rotation matrix is R
@@ -294,6 +356,15 @@ class _Track:
     style: tuple[tuple[int, int, int], float] | None = None
 
 
+@dataclass
+class _Follow:
+    """One follow choice: of a session, or the broadcast one (key None)."""
+
+    track_id: int | None  # None: this session stopped (shadows a broadcast choice)
+    target: np.ndarray | None = None  # look-at point last aimed at
+    offset: np.ndarray | None = None  # where cameras that start following are put
+
+
 class Scene3D:
     """The viser server and its scene, updated from stream messages.
 
@@ -341,6 +412,7 @@ class Scene3D:
         with contextlib.redirect_stdout(io.StringIO()):  # viser prints a banner: we print URLs
             self.server = viser.ViserServer(host=host, port=port, label="demtrack", verbose=False)
         self.url = f"http://{display_host(host)}:{self.server.get_port()}/"
+        self._configure_gui()
         self.nodes: dict[str, Any] = {}
         self.n_messages = 0
         self.n_dropped = 0
@@ -354,13 +426,19 @@ class Scene3D:
         self._tracks: dict[int, _Track] = {}
         self._dirty_rays = False
         self._dirty_tracks: set[int] = set()
-        self._follow: int | None = None
-        #: The latest follow choice asked for (the scene thread applies it on its next pass).
-        self._follow_asked: int | None = None
-        self._follow_target: np.ndarray | None = None  # look-at point last aimed at
-        self._follow_offset: np.ndarray | None = None  # for cameras that start following
+        #: Follow choices by session (None: the broadcast one); the scene thread's own.
+        self._follows: dict[str | None, _Follow] = {}
+        #: The latest choices asked for (the scene thread applies them on its next pass).
+        self._asked: dict[str | None, int | None] = {}
+        #: Each connected client's session (None: it joined none), set when it connects.
+        self._client_session: dict[int, str | None] = {}
+        #: Each following client's own head marker and label (client-scoped nodes).
+        self._markers: dict[int, tuple[Any, Any]] = {}
+        #: Tracks drawn as followed: the broadcast's and those of sessions with a client.
+        self._highlighted: set[int] = set()
         self._aim_lock = threading.Lock()
         self.server.on_client_connect(self._on_client_connect)
+        self.server.on_client_disconnect(self._on_client_disconnect)
         self._thread = threading.Thread(target=self._run, name="demtrack-scene3d", daemon=True)
         self._thread.start()
 
@@ -375,8 +453,13 @@ class Scene3D:
                 self._inbox.append(m)
         self._wake.set()
 
-    def follow(self, track_id: int | None, track: dict[str, Any] | None = None) -> None:
-        """Follow a track with every client's camera (``None`` stops following).
+    def follow(
+        self,
+        track_id: int | None,
+        track: dict[str, Any] | None = None,
+        session: str | None = None,
+    ) -> None:
+        """Follow a track with the cameras of a session's clients (``None`` stops).
 
         Parameters
         ----------
@@ -385,13 +468,39 @@ class Scene3D:
             The track's body as ``/api/tracks`` gives it (all points), for a track this
             scene has not been sent yet (it only sees the stream since it started).
             Later ``track_update`` messages keep it current.
+        session : str, optional
+            A follow session (:data:`SESSION_PATTERN`): only its clients move. Without
+            one, every client follows and the sessions' own choices are dropped.
+
+        Raises
+        ------
+        ValueError
+            For a malformed session id.
         """
-        self._follow_asked = None if track_id is None else int(track_id)
-        self._inbox.append({"type": "_follow", "track_id": track_id, "track": track})
+        if session is not None and not _SESSION_RE.match(session):
+            raise ValueError(f"bad follow session {session!r}: want {SESSION_PATTERN}")
+        tid = None if track_id is None else int(track_id)
+        if session is None:
+            self._asked.clear()
+        else:
+            self._asked.pop(session, None)
+            while len(self._asked) >= _MAX_SESSIONS:
+                oldest = next((k for k in self._asked if k is not None), None)
+                if oldest is None:
+                    break
+                del self._asked[oldest]
+        self._asked[session] = tid
+        self._inbox.append({"type": "_follow", "track_id": tid, "track": track, "session": session})
         self._wake.set()
 
-    def follow_state(self) -> dict[str, Any]:
-        """The followed track, the point the cameras look at, and each client's camera.
+    def follow_state(self, session: str | None = None) -> dict[str, Any]:
+        """The followed track, the point the cameras look at, and the clients' cameras.
+
+        Parameters
+        ----------
+        session : str, optional
+            Report this session's choice and clients; without one, the broadcast choice
+            and every client.
 
         Returns
         -------
@@ -399,22 +508,31 @@ class Scene3D:
             ``track_id`` (or None; the latest choice asked for, reported at once while the
             scene applies it on its next pass), ``look_at_enu`` (the followed track's
             newest point, site frame m, or None before it has one), ``clients``:
-            ``[{id, look_at_enu, position_enu}]`` as each connected viser client last
-            reported or was sent.
+            ``[{id, session, track_id, look_at_enu, position_enu}]`` as each connected
+            viser client last reported or was sent (``track_id``: what it follows).
         """
-        target = self._follow_target
+        asked = dict(self._asked)
+        track_id = asked[session] if session in asked else asked.get(None)
+        rec = self._effective(session)
+        target = None if rec is None or rec.track_id != track_id else rec.target
         clients = []
         for cid, client in sorted(self.server.get_clients().items()):
+            mine = self._client_session.get(cid)
+            if session is not None and mine != session:
+                continue
+            followed = self._effective(mine)
             cam = client.camera
             clients.append(
                 {
                     "id": int(cid),
+                    "session": mine,
+                    "track_id": None if followed is None else followed.track_id,
                     "look_at_enu": [float(x) for x in cam.look_at],
                     "position_enu": [float(x) for x in cam.position],
                 }
             )
         return {
-            "track_id": self._follow_asked,  # the choice as asked: read-your-writes
+            "track_id": track_id,  # the choice as asked: read-your-writes
             "look_at_enu": None if target is None else [float(x) for x in target],
             "clients": clients,
         }
@@ -438,6 +556,19 @@ class Scene3D:
         self.server.stop()
 
     # ----------------------------------------------------------------- static
+    def _configure_gui(self) -> None:
+        """Keep viser's control panel out of the view: small, no logo, minimised.
+
+        The console embeds the scene in a tab about 640 px wide at 1280 x 800; viser's
+        panel (scene tree, camera tools) stays one click away in its minimised bar.
+        Theme and placement are persistent messages, so later clients get them too.
+        """
+        gui = self.server.gui
+        gui.configure_theme(
+            control_width="small", show_logo=False, show_share_button=False, dark_mode=True
+        )
+        gui.main_panel.minimize()
+
     def _add(self, name: str, handle: Any) -> Any:
         self.nodes[name] = handle
         return handle
@@ -561,7 +692,11 @@ class Scene3D:
             elif kind == "track_update":
                 self._on_track(m["track"])
             elif kind == "_follow":
-                self._on_follow(m["track_id"], m.get("track"))
+                self._on_follow(m["track_id"], m.get("track"), m.get("session"))
+            elif kind == "_client":
+                self._on_client(m["client"])
+            elif kind == "_client_left":
+                self._restyle()
             elif kind == "_flush":
                 flushes.append(m["event"])
             self.n_messages += 1
@@ -611,28 +746,61 @@ class Scene3D:
                     ray.chosen = int(np.argmin(np.linalg.norm(ray.hits - q, axis=1)))
                     self._dirty_rays = True
 
-    def _on_follow(self, track_id: int | None, body: dict[str, Any] | None) -> None:
-        old = self._follow
-        if old is not None:
-            self._dirty_tracks.add(old)  # back to its own colour
-        self._follow = None if track_id is None else int(track_id)
-        self._follow_target = None
-        self._follow_offset = None
-        if self._follow is None:
-            for name in ("/follow/head", "/follow/label"):
-                handle = self.nodes.pop(name, None)
-                if handle is not None:
-                    handle.remove()
-            return
-        known = self._tracks.get(self._follow)
-        if body is not None and int(body["id"]) == self._follow:
-            n = len(body.get("points") or [])
-            if known is None or n > len(known.points):
-                self._on_track({**body, "first_index": 0})
-        self._dirty_tracks.add(self._follow)
+    def _effective(self, session: str | None) -> _Follow | None:
+        """The follow choice a client of ``session`` obeys (its own, else the broadcast)."""
+        rec = None if session is None else self._follows.get(session)
+        return rec if rec is not None else self._follows.get(None)
 
-    def _followed_points(self) -> np.ndarray | None:
-        tr = None if self._follow is None else self._tracks.get(self._follow)
+    def _followed_ids(self) -> set[int]:
+        """Every followed track (kept from pruning)."""
+        return {f.track_id for f in list(self._follows.values()) if f.track_id is not None}
+
+    def _restyle(self) -> None:
+        """Highlight the tracks someone looks at: the broadcast's and connected sessions'.
+
+        A session whose page is gone (or has not opened its 3D view) keeps its choice for
+        clients that connect later but does not colour the scene for everyone else.
+        """
+        present = set(list(self._client_session.values()))
+        now = {
+            f.track_id
+            for k, f in list(self._follows.items())
+            if f.track_id is not None and (k is None or k in present)
+        }
+        self._dirty_tracks |= now ^ self._highlighted  # their colour and thickness change
+        self._highlighted = now
+
+    def _on_follow(
+        self, track_id: int | None, body: dict[str, Any] | None, session: str | None
+    ) -> None:
+        if session is None:
+            self._follows.clear()  # the broadcast: every client, sessions' choices go
+            if track_id is not None:
+                self._follows[None] = _Follow(track_id)
+        else:
+            self._follows.pop(session, None)
+            # A session's stop is kept only while it has a broadcast choice to shadow.
+            if track_id is not None or None in self._follows:
+                self._follows[session] = _Follow(track_id)
+            sessions = [k for k in self._follows if k is not None]
+            for k in sessions[: max(0, len(sessions) - _MAX_SESSIONS)]:
+                del self._follows[k]
+        self._restyle()
+        if track_id is not None:
+            known = self._tracks.get(track_id)
+            if body is not None and int(body["id"]) == track_id:
+                n = len(body.get("points") or [])
+                if known is None or n > len(known.points):
+                    self._on_track({**body, "first_index": 0})
+                    self._dirty_tracks.add(track_id)
+        # Clients that follow nothing now lose their marker; cameras stay where they are.
+        for cid in list(self._markers):
+            rec = self._effective(self._client_session.get(cid))
+            if rec is None or rec.track_id is None:
+                self._drop_marker(cid)
+
+    def _points_of(self, track_id: int | None) -> np.ndarray | None:
+        tr = None if track_id is None else self._tracks.get(track_id)
         if tr is None or not tr.points:
             return None
         return np.asarray(tr.points, dtype=np.float64)
@@ -645,9 +813,14 @@ class Scene3D:
             for client in clients:
                 cam = client.camera
                 try:
-                    offset = np.asarray(cam.position) - np.asarray(cam.look_at)
-                    if not keep_offset or not np.all(np.isfinite(offset)) or not offset.any():
-                        offset = start
+                    offset = start
+                    # viser's getters raise until the client has sent its camera once:
+                    # read them only to keep an offset, never to start from ``start``
+                    if keep_offset:
+                        with contextlib.suppress(AssertionError):
+                            own = np.asarray(cam.position) - np.asarray(cam.look_at)
+                            if np.all(np.isfinite(own)) and own.any():
+                                offset = own
                     with client.atomic():
                         cam.up_direction = (0.0, 0.0, 1.0)
                         cam.position = tuple(float(x) for x in target + offset)
@@ -655,35 +828,75 @@ class Scene3D:
                 except Exception:  # noqa: BLE001 - a client that left meanwhile
                     log.debug("could not move client %s's camera", client.client_id)
 
+    def _mark(self, client: Any, track_id: int, target: np.ndarray) -> None:
+        """Put ``client``'s own head marker and label at ``target`` (client-scoped nodes)."""
+        try:
+            head = client.scene.add_icosphere(
+                "/follow/head", radius=1.2, color=_FOLLOW_COLOUR, position=target
+            )
+            label = client.scene.add_label(
+                "/follow/label", f"#{track_id}", position=target + [0.0, 0.0, 3.0]
+            )
+        except Exception:  # noqa: BLE001 - a client that left meanwhile
+            log.debug("could not mark client %s's followed track", client.client_id)
+            return
+        self._markers[int(client.client_id)] = (head, label)
+
+    def _drop_marker(self, client_id: int) -> None:
+        handles = self._markers.pop(client_id, None)
+        for h in handles or ():
+            with contextlib.suppress(Exception):  # the client may have left
+                h.remove()
+
     def _on_client_connect(self, client: Any) -> None:
-        """A client that connects while a track is followed starts by looking at it."""
-        target, start = self._follow_target, self._follow_offset
-        if target is not None and start is not None:
-            self._aim([client], target, start, keep_offset=False)
+        """Note a new client's session; the scene thread aims it on its next pass."""
+        cid = int(client.client_id)
+        self._client_session[cid] = session_of_path(_websocket_path(self.server, cid))
+        self._inbox.append({"type": "_client", "client": client})
+        self._wake.set()
+
+    def _on_client_disconnect(self, client: Any) -> None:
+        cid = int(client.client_id)
+        self._client_session.pop(cid, None)
+        self._markers.pop(cid, None)  # its nodes went with it
+        self._inbox.append({"type": "_client_left"})
+        self._wake.set()
+
+    def _on_client(self, client: Any) -> None:
+        """A client that connects while its session follows a track starts looking at it."""
+        cid = int(client.client_id)
+        if cid not in self._client_session:
+            return  # gone already
+        self._restyle()
+        rec = self._effective(self._client_session.get(cid))
+        if rec is None or rec.track_id is None or rec.target is None or rec.offset is None:
+            return
+        self._aim([client], rec.target, rec.offset, keep_offset=False)
+        self._mark(client, rec.track_id, rec.target)
 
     def _update_follow(self) -> None:
-        pts = self._followed_points()
-        if pts is None:
+        """Aim each follow choice's clients at its track's newest point, if it moved."""
+        if not self._follows:
             return
-        target = pts[-1] + [0.0, 0.0, _LIFT_M]
-        first = self._follow_offset is None
-        if not first and self._follow_target is not None:
-            if np.allclose(target, self._follow_target):
-                return
-        start = follow_offset(pts) if first else self._follow_offset
-        assert start is not None  # set on the first aim, kept until the next follow()
-        self._follow_offset = start
-        self._follow_target = target
-        scene = self.server.scene
-        self._add(
-            "/follow/head",
-            scene.add_icosphere("/follow/head", radius=1.2, color=_FOLLOW_COLOUR, position=target),
-        )
-        self._add(
-            "/follow/label",
-            scene.add_label("/follow/label", f"#{self._follow}", position=target + [0.0, 0.0, 3.0]),
-        )
-        self._aim(list(self.server.get_clients().values()), target, start, keep_offset=not first)
+        groups: dict[str | None, list[Any]] = {}
+        for cid, client in self.server.get_clients().items():
+            session = self._client_session.get(cid)
+            key = session if session is not None and session in self._follows else None
+            groups.setdefault(key, []).append(client)
+        for key, rec in list(self._follows.items()):
+            pts = self._points_of(rec.track_id)
+            if rec.track_id is None or pts is None:
+                continue
+            target = pts[-1] + [0.0, 0.0, _LIFT_M]
+            first = rec.offset is None
+            if not first and rec.target is not None and np.allclose(target, rec.target):
+                continue
+            start = follow_offset(pts) if rec.offset is None else rec.offset
+            rec.offset, rec.target = start, target
+            members = groups.get(key, [])
+            self._aim(members, target, start, keep_offset=not first)
+            for client in members:
+                self._mark(client, rec.track_id, target)
 
     def _render(self) -> None:
         scene = self.server.scene
@@ -739,12 +952,11 @@ class Scene3D:
                 if tr is not None:
                     self._draw_track(tr)
             self._dirty_tracks.clear()
-        if self._follow is not None:
-            self._update_follow()
+        self._update_follow()
 
     def _track_style(self, tr: _Track) -> tuple[tuple[int, int, int], float]:
         colour = track_colour(tr.id)
-        if tr.id == self._follow:
+        if tr.id in self._highlighted:
             return _FOLLOW_COLOUR, 7.0
         if tr.live:
             return colour, 4.0
@@ -789,8 +1001,9 @@ class Scene3D:
     def _prune_tracks(self) -> None:
         if len(self._tracks) <= _MAX_TRACKS:
             return
+        followed = self._followed_ids()
         ended = sorted(
-            (t for t in self._tracks.values() if not t.live and t.id != self._follow),
+            (t for t in self._tracks.values() if not t.live and t.id not in followed),
             key=lambda t: t.t_last,
         )
         for tr in ended[: len(self._tracks) - _MAX_TRACKS]:

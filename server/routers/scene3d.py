@@ -1,19 +1,21 @@
 """``/api/scene3d/follow``: which track the 3D scene's cameras follow.
 
 The console sends ``PUT`` when the operator selects a track (and ``track_id: null`` when
-the selection is cleared); the viser scene then points every connected client's camera
-at the track's newest position and keeps following it (:meth:`Scene3D.follow`). The
-choice is the scene's, so every 3D client follows the same track.
+the selection is cleared); the viser scene then points the cameras of that console page's
+viser clients (its follow ``session``) at the track's newest position and keeps following
+it (:meth:`Scene3D.follow`). Without a session the choice is the broadcast one: every 3D
+client follows the same track (and the sessions' own choices are dropped).
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, HTTPException, Request
+from fastapi import APIRouter, Depends, HTTPException, Query, Request
 from pydantic import BaseModel, ConfigDict, Field
 from starlette.concurrency import run_in_threadpool
 
+from ..scene3d import FOLLOW_PATH, SESSION_PATTERN
 from ..security import require_operator, require_reader
 from ..state import StateDep
 
@@ -28,12 +30,23 @@ class FollowIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     track_id: int | None = Field(..., ge=0, description="track id; null stops following")
+    session: str | None = Field(
+        None,
+        pattern=SESSION_PATTERN,
+        description=(
+            "follow session (a console page's random id): only the viser clients that"
+            f" connected on `ws://<viser>{FOLLOW_PATH}<session>` move; omitted, every"
+            " client follows and the sessions' own choices are dropped"
+        ),
+    )
 
 
 class ClientCamera(BaseModel):
     """A connected 3D client's camera (site frame, m)."""
 
     id: int
+    session: str | None = Field(None, description="the follow session it joined, if any")
+    track_id: int | None = Field(None, description="the track its camera follows, if any")
     look_at_enu: tuple[float, float, float]
     position_enu: tuple[float, float, float]
 
@@ -46,6 +59,12 @@ class FollowOut(BaseModel):
         description="the followed track's newest point (site frame, m), lifted 0.4 m as drawn"
     )
     clients: list[ClientCamera]
+
+
+SessionQuery = Annotated[
+    str | None,
+    Query(pattern=SESSION_PATTERN, description="a follow session (see PUT); omitted: all"),
+]
 
 
 def _scene(request: Request) -> Any:
@@ -61,9 +80,13 @@ def _scene(request: Request) -> Any:
     dependencies=[Depends(require_reader)],
     summary="The followed track and the 3D clients' cameras",
 )
-def get_follow(request: Request) -> dict[str, Any]:
-    """The followed track (or null), its look-at point, and each connected client's camera."""
-    state: dict[str, Any] = _scene(request).follow_state()
+def get_follow(request: Request, session: SessionQuery = None) -> dict[str, Any]:
+    """The followed track (or null), its look-at point, and the connected clients' cameras.
+
+    With ``session``: that session's choice (its own, else the broadcast one) and its
+    clients only; without: the broadcast choice and every client.
+    """
+    state: dict[str, Any] = _scene(request).follow_state(session)
     return state
 
 
@@ -74,19 +97,19 @@ def get_follow(request: Request) -> dict[str, Any]:
     summary="Follow a track in the 3D scene",
 )
 async def put_follow(body: FollowIn, request: Request, state: StateDep) -> dict[str, Any]:
-    """Point every 3D client's camera at the track's newest position and keep following it.
+    """Point 3D clients' cameras at the track's newest position and keep following it.
 
-    404 for a track the server does not have. Answers once the scene has taken the
-    request (or after 2 s), with the same body as ``GET``.
+    The clients of ``session`` only, or every client without one. 404 for a track the
+    server does not have. Answers once the scene has taken the request (or after 2 s),
+    with the same body as ``GET`` (for the same session).
     """
     scene = _scene(request)
     track = None
     if body.track_id is not None:
-        found = [b for b in state.store.tracks() if b["id"] == body.track_id]
-        if not found:
+        track = state.store.track(body.track_id)
+        if track is None:
             raise HTTPException(404, f"no track {body.track_id}")
-        track = found[0]
-    scene.follow(body.track_id, track)
+    scene.follow(body.track_id, track, session=body.session)
     await run_in_threadpool(scene.flush, 2.0)
-    out: dict[str, Any] = scene.follow_state()
+    out: dict[str, Any] = scene.follow_state(body.session)
     return out

@@ -22,6 +22,7 @@ from demtrack.server.scene3d import (
     frustum_fov_aspect,
     polyline_segments,
     road_polylines,
+    session_of_path,
     terrain_mesh,
     texture_uv,
     track_colour,
@@ -316,14 +317,14 @@ class FakeViserClient:
     client: :meth:`viser.ViserServer.get_clients` lists it once its camera arrived.
     """
 
-    def __init__(self, port: int) -> None:
+    def __init__(self, port: int, path: str = "/") -> None:
         import threading
 
         import viser
         from websockets.sync.client import connect
 
         self.ws = connect(
-            f"ws://127.0.0.1:{port}",
+            f"ws://127.0.0.1:{port}{path}",
             subprotocols=[f"viser-v{viser.__version__}"],  # type: ignore[list-item]
             max_size=None,
         )
@@ -423,7 +424,9 @@ def test_follow_moves_every_client_camera_to_the_track(scene):
         line = scene.nodes["/tracks/41/0"]
         assert np.asarray(line.colors).reshape(-1, 3)[0].tolist() == [255, 230, 0]
         assert line.thickness == 7.0
-        np.testing.assert_allclose(scene.nodes["/follow/head"].position, head)
+        [(marker, label)] = scene._markers.values()  # the client's own, client-scoped
+        np.testing.assert_allclose(marker.position, head)
+        assert label.text == "#41"
         # The operator orbits (a new camera from the client); new fixes arrive: the camera
         # follows the new head and keeps the operator's offset.
         mine = np.array([15.0, 25.0, 40.0])
@@ -452,7 +455,7 @@ def test_follow_moves_every_client_camera_to_the_track(scene):
         # cameras stay where they are.
         scene.follow(None)
         assert scene.flush()
-        assert "/follow/head" not in scene.nodes and scene.follow_state()["track_id"] is None
+        assert not scene._markers and scene.follow_state()["track_id"] is None
         line = scene.nodes["/tracks/41/0"]
         assert tuple(np.asarray(line.colors).reshape(-1, 3)[0]) == track_colour(41)
         assert line.thickness == 4.0
@@ -460,6 +463,166 @@ def test_follow_moves_every_client_camera_to_the_track(scene):
     finally:
         a.close()
         scene.follow(None)
+
+
+def test_session_of_path():
+    assert session_of_path("/follow/abcd1234") == "abcd1234"
+    assert session_of_path("/follow/abcd-_1234/?x=1") == "abcd-_1234"
+    sid = "f" * 64
+    assert session_of_path(f"/follow/{sid}") == sid
+    for bad in (None, "", "/", "/follow/", "/follow/short", "/follow/" + "f" * 65,
+                "/follow/abcd1234/x", "/follow/abc%2E1234", "/x/follow/abcd1234",
+                "/Follow/abcd1234", "/follow/abcd 1234"):  # fmt: skip
+        assert session_of_path(bad) is None, bad
+
+
+def test_follow_sessions_move_only_their_own_clients(scene):
+    """Two operators' pages (sessions A, B) and a plain client: each follows its own."""
+    lift = np.array([0.0, 0.0, 0.4])
+    port = scene.server.get_port()
+    home = (np.array([0.0, -200.0, 150.0]), np.zeros(3))
+    sa, sb = "sessionA-0123", "sessionB-4567"
+    walks = {
+        51: [(20.0 + 4.0 * k, -10.0, 3.0) for k in range(6)],  # eastwards
+        52: [(-30.0, 10.0 + 5.0 * k, 6.0) for k in range(5)],  # northwards
+        53: [(5.0, 5.0 - 3.0 * k, 1.0) for k in range(4)],  # southwards
+        54: [(-5.0 - 3.0 * k, -40.0, 2.0) for k in range(4)],  # westwards
+    }
+    heads = {t: np.array(w[-1]) + lift for t, w in walks.items()}
+
+    def handle(fake_count: int):
+        wait_for(lambda: len(scene.server.get_clients()) == fake_count)
+        return max(scene.server.get_clients().items())[1]
+
+    def at_home(client) -> bool:
+        return np.allclose(client.camera.position, home[0]) and np.allclose(
+            client.camera.look_at, home[1]
+        )
+
+    def looks_at(client, tid) -> bool:
+        return np.allclose(client.camera.look_at, heads[tid], atol=1e-9)
+
+    fakes = []
+    try:
+        a = FakeViserClient(port, f"/follow/{sa}")
+        fakes.append(a)
+        a.send_camera(*home)
+        ca = handle(1)
+        b = FakeViserClient(port, f"/follow/{sb}")
+        fakes.append(b)
+        b.send_camera(*home)
+        cb = handle(2)
+        plain = FakeViserClient(port)
+        fakes.append(plain)
+        plain.send_camera(*home)
+        cp = handle(3)
+        # Each client's session comes from its WebSocket path (read when it connects).
+        wait_for(lambda: len(scene.follow_state()["clients"]) == 3)
+        sessions = {k["id"]: k["session"] for k in scene.follow_state()["clients"]}
+        assert sessions == {ca.client_id: sa, cb.client_id: sb, cp.client_id: None}
+
+        scene.follow(51, follow_body(51, walks[51]), session=sa)
+        assert scene.flush()
+        assert looks_at(ca, 51)
+        np.testing.assert_allclose(
+            ca.camera.position - heads[51], follow_offset(np.array(walks[51]))
+        )
+        assert at_home(cb) and at_home(cp)
+        scene.follow(52, follow_body(52, walks[52]), session=sb)
+        assert scene.flush()
+        assert looks_at(cb, 52) and looks_at(ca, 51) and at_home(cp)
+        # Each following client has its own marker at its own track's head.
+        marks = {cid: (m.position, lab.text) for cid, (m, lab) in scene._markers.items()}
+        assert set(marks) == {ca.client_id, cb.client_id}
+        np.testing.assert_allclose(marks[ca.client_id][0], heads[51])
+        np.testing.assert_allclose(marks[cb.client_id][0], heads[52])
+        assert (marks[ca.client_id][1], marks[cb.client_id][1]) == ("#51", "#52")
+        # Both followed tracks are highlighted.
+        for tid in (51, 52):
+            assert scene.nodes[f"/tracks/{tid}/0"].thickness == 7.0
+        # A session's state: its choice and its clients; without one: the broadcast.
+        st = scene.follow_state(sa)
+        assert st["track_id"] == 51 and [k["id"] for k in st["clients"]] == [ca.client_id]
+        np.testing.assert_allclose(st["look_at_enu"], heads[51])
+        st = scene.follow_state()
+        assert st["track_id"] is None and st["look_at_enu"] is None
+        assert {k["id"]: k["track_id"] for k in st["clients"]} == {
+            ca.client_id: 51, cb.client_id: 52, cp.client_id: None}  # fmt: skip
+        assert scene.follow_state("sessionC-none")["clients"] == []
+
+        # A late client of session A starts at A's track; a late plain one stays put.
+        a2 = FakeViserClient(port, f"/follow/{sa}")
+        fakes.append(a2)
+        a2.send_camera(*home)
+        ca2 = handle(4)
+        wait_for(lambda: looks_at(ca2, 51))
+        late = FakeViserClient(port)
+        fakes.append(late)
+        late.send_camera(*home)
+        cl = handle(5)
+        wait_for(lambda: cl.client_id in scene._client_session)  # its connect was seen
+        assert scene.flush()  # ... and handled
+        assert at_home(cl) and looks_at(cb, 52)
+
+        # A page that follows before it opens its 3D view: nothing moves, the track is not
+        # highlighted for the others; its client, once it comes, starts at that track.
+        sc = "sessionC-89ab"
+        scene.follow(54, follow_body(54, walks[54]), session=sc)
+        assert scene.flush()
+        assert scene.nodes["/tracks/54/0"].thickness == 4.0
+        c3 = FakeViserClient(port, f"/follow/{sc}")
+        try:
+            c3.send_camera(*home)
+            cc = handle(6)
+            wait_for(lambda: looks_at(cc, 54))
+            assert scene.flush()
+            assert scene.nodes["/tracks/54/0"].thickness == 7.0
+            assert looks_at(ca, 51) and looks_at(cb, 52) and at_home(cl)
+        finally:
+            c3.close()
+        # ... and when the page is gone its track is drawn as any other again.
+        wait_for(lambda: len(scene.server.get_clients()) == 5)
+        wait_for(lambda: scene.flush() and scene.nodes["/tracks/54/0"].thickness == 4.0)
+        assert scene.follow_state(sc)["track_id"] == 54  # kept for a client that comes back
+
+        # The broadcast (no session): every client follows, the sessions' choices go.
+        scene.follow(53, follow_body(53, walks[53]))
+        assert scene.flush()
+        for c in (ca, cb, cp, ca2, cl):
+            assert looks_at(c, 53), c.client_id
+        assert scene.follow_state(sa)["track_id"] == 53
+        assert scene.nodes["/tracks/51/0"].thickness == 4.0  # no longer followed
+        # Session A stops: its cameras stay, the others keep following 53 as it moves.
+        scene.follow(None, session=sa)
+        assert scene.flush()
+        assert scene.follow_state(sa)["track_id"] is None
+        assert scene.follow_state(sb)["track_id"] == 53
+        assert set(scene._markers) == {cb.client_id, cp.client_id, cl.client_id}
+        more = [(5.0, -10.0 - 3.0 * k, 1.0) for k in range(1, 3)]
+        upd = follow_body(53, walks[53] + more)
+        upd["points"] = upd["points"][len(walks[53]) :]
+        upd["first_index"] = len(walks[53])
+        scene.publish([TrackUpdateMessage.model_validate(
+            {"type": "track_update", "seq": 1, "track": upd}).model_dump()])  # fmt: skip
+        assert scene.flush()
+        new_head = np.array(more[-1]) + lift
+        for c in (cb, cp, cl):
+            np.testing.assert_allclose(c.camera.look_at, new_head, atol=1e-9)
+        for c in (ca, ca2):
+            assert looks_at(c, 53)  # the old head: A stopped there
+        with pytest.raises(ValueError, match="bad follow session"):
+            scene.follow(1, session="no/slash")
+    finally:
+        for f in fakes:
+            f.close()
+        scene.follow(None)
+        scene.flush()
+
+
+def cam_id(scene, session: str) -> int:
+    """The id of a session's one client."""
+    [k] = scene.follow_state(session)["clients"]
+    return int(k["id"])
 
 
 def test_follow_endpoint(client_factory):
@@ -497,5 +660,45 @@ def test_follow_endpoint(client_factory):
         r = c.put("/api/scene3d/follow", json={"track_id": None}, headers=AUTH)
         assert r.status_code == 200 and r.json()["track_id"] is None
         assert r.json()["look_at_enu"] is None
+        # A follow session: its own viser client moves, the plain one stays where it is.
+        sid = "0123456789abcdef"
+        mine = FakeViserClient(scene.server.get_port(), f"/follow/{sid}")
+        try:
+            mine.send_camera(position=(0.0, -200.0, 150.0), look_at=(0.0, 0.0, 0.0))
+            wait_for(lambda: len(scene.follow_state(sid)["clients"]) == 1)
+            viewer.send_camera(position=(0.0, -200.0, 150.0), look_at=(0.0, 0.0, 0.0))
+            [plain_handle] = [
+                h for i, h in scene.server.get_clients().items() if i != cam_id(scene, sid)
+            ]
+            wait_for(lambda: np.allclose(plain_handle.camera.look_at, 0.0))
+            for bad in ("short", "has/slash", "x" * 65, 7):
+                body = {"track_id": tid, "session": bad}
+                assert c.put("/api/scene3d/follow", json=body, headers=AUTH).status_code == 422
+            assert c.get("/api/scene3d/follow?session=short", headers=AUTH).status_code == 422
+            body = {"track_id": tid, "session": sid}
+            assert c.put("/api/scene3d/follow", json=body).status_code == 401
+            r = c.put("/api/scene3d/follow", json=body, headers=AUTH)
+            assert r.status_code == 200, r.text
+            got = r.json()
+            assert got["track_id"] == tid
+            [cam] = got["clients"]
+            assert cam["session"] == sid and cam["track_id"] == tid
+            np.testing.assert_allclose(cam["look_at_enu"], want, atol=1e-9)
+            assert c.get(f"/api/scene3d/follow?session={sid}", headers=AUTH).json() == got
+            everyone = c.get("/api/scene3d/follow", headers=AUTH).json()
+            assert everyone["track_id"] is None and len(everyone["clients"]) == 2
+            [other] = [k for k in everyone["clients"] if k["session"] is None]
+            assert other["track_id"] is None
+            assert other["look_at_enu"] == [0.0, 0.0, 0.0]  # untouched
+            r = c.put("/api/scene3d/follow", json={"track_id": None, "session": sid}, headers=AUTH)
+            assert r.status_code == 200 and r.json()["track_id"] is None
+        finally:
+            mine.close()
+        # The OpenAPI schema documents the session (body and query).
+        doc = c.get("/openapi.json").json()
+        follow_in = doc["components"]["schemas"]["FollowIn"]["properties"]["session"]
+        assert "follow session" in follow_in["description"]
+        params = doc["paths"]["/api/scene3d/follow"]["get"]["parameters"]
+        assert [q["name"] for q in params] == ["session"]
     finally:
         viewer.close()

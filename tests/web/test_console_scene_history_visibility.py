@@ -36,74 +36,113 @@ def poll(fn, timeout_s: float = 60.0, every_s: float = 0.25) -> Any:
 
 # ------------------------------------------------------------------- 3D follows
 def test_selecting_a_track_makes_the_3d_cameras_follow_it(
-    page, sample_site_dir: Path, tmp_path: Path, scenario_records
+    page, browser, sample_site_dir: Path, tmp_path: Path, scenario_records
 ):
+    """Two operators' pages follow two tracks: each page's viser client looks at its own."""
     srv = Server(
         sample_site_dir,
         tmp_path / "scene.sqlite3",
         free_port(),
         extra_args=("--3d", "--viser-port", "0"),
     ).start()
+    other = browser.new_context(viewport={"width": 1280, "height": 800})
+    page2 = other.new_page()
+    errors2: list[str] = []
+    page2.on("console", lambda m: errors2.append(m.text) if m.type == "error" else None)
+    page2.on("pageerror", lambda e: errors2.append(f"uncaught: {e}"))
     try:
         with srv.client() as c:
             post_until(c, scenario_records, -1.0, 16.0)
             open_console(page, srv)
+            open_console(page2, srv)
             assert page.evaluate("window.demtrack.ui.viserUrl").startswith("http://127.0.0.1:")
+            s1, s2 = (p.evaluate("window.demtrack.ui.follow3d.session") for p in (page, page2))
+            assert re.fullmatch("[0-9a-f]{32}", s1) and s1 != s2
             page.wait_for_selector("#track-list > div[data-track='1']")
             with page.expect_request(
                 lambda r: r.method == "PUT" and r.url.endswith("/api/scene3d/follow")
             ) as req:
                 page.locator("#track-list > div[data-track='1']").click()
-            assert req.value.post_data_json == {"track_id": 1}
+            assert req.value.post_data_json == {"track_id": 1, "session": s1}
             assert req.value.headers["authorization"] == AUTH["Authorization"]
             page.wait_for_function(
                 "document.querySelector('#follow-3d:not(.hidden)')?.textContent"
                 ".includes('follow track #1 ·')"
             )
+            # The second operator picks another track.
+            row2 = "#track-list > div[data-track]:not([data-track='1'])"
+            page2.wait_for_selector(row2)
+            t2 = int(page2.locator(row2).first.get_attribute("data-track"))
+            with page2.expect_request(
+                lambda r: r.method == "PUT" and r.url.endswith("/api/scene3d/follow")
+            ) as req2:
+                page2.locator(row2).first.click()
+            assert req2.value.post_data_json == {"track_id": t2, "session": s2}
 
             def newest(tid: int) -> list[float]:
                 p = c.get(f"/api/tracks/{tid}").json()["tracks"][0]["points"][-1]
                 return [p["e_m"], p["n_m"], p["u_m"] + LIFT_M]
 
-            def looking_at(want: list[float]) -> bool:
-                st = c.get("/api/scene3d/follow").json()
+            def looking_at(session: str, tid: int, want: list[float]) -> bool:
+                st = c.get("/api/scene3d/follow", params={"session": session}).json()
                 return (
-                    st["track_id"] == 1
+                    st["track_id"] == tid
                     and math.dist(st["look_at_enu"], want) < 1e-6
                     and bool(st["clients"])
-                    and all(math.dist(k["look_at_enu"], want) < 1e-3 for k in st["clients"])
+                    and all(
+                        k["session"] == session
+                        and k["track_id"] == tid
+                        and math.dist(k["look_at_enu"], want) < 1e-3
+                        for k in st["clients"]
+                    )
                 )
 
-            # The 3D tab: viser's own client in the iframe connects and starts at the head.
-            # (On this machine WebGL is software-rendered and shares the page's thread, so
-            # the test goes back to the map while the 3D view is not looked at.)
-            page.locator("#tab-3d").click()
-            first = newest(1)
-            poll(lambda: looking_at(first), 120)
+            # The 3D tab: viser's own client in the iframe connects on its page's session
+            # and starts at that page's track head. (On this machine WebGL is software-
+            # rendered and shares the page's thread, so each page goes back to the map
+            # while its 3D view is not looked at.)
+            for pg, sid in ((page, s1), (page2, s2)):
+                pg.locator("#tab-3d").click()
+                src = pg.evaluate("document.querySelector('#viser').src")
+                assert src.startswith(pg.evaluate("window.demtrack.ui.viserUrl") + "?websocket=")
+                assert src.endswith(f"%2Ffollow%2F{sid}")
+            first = {1: newest(1), t2: newest(t2)}
+            assert math.dist(first[1], first[t2]) > 1.0
+            poll(lambda: looking_at(s1, 1, first[1]), 120)
+            poll(lambda: looking_at(s2, t2, first[t2]), 120)
             page.locator("#tab-map").click()
-            # New fixes arrive: the cameras follow the track's new head.
+            page2.locator("#tab-map").click()
+            everyone = c.get("/api/scene3d/follow").json()
+            assert everyone["track_id"] is None  # no broadcast choice
+            assert sorted(k["session"] for k in everyone["clients"]) == sorted([s1, s2])
+            # New fixes arrive: each page's cameras follow its own track's new head.
             post_until(c, scenario_records, 16.0, 24.0)
             second = newest(1)
-            assert math.dist(first, second) > 5.0
-            poll(lambda: looking_at(second))
-            cam = c.get("/api/scene3d/follow").json()["clients"][0]
+            assert math.dist(first[1], second) > 5.0
+            poll(lambda: looking_at(s1, 1, second))
+            poll(lambda: looking_at(s2, t2, newest(t2)))
+            cam = c.get("/api/scene3d/follow", params={"session": s1}).json()["clients"][0]
             assert cam["position_enu"][2] > second[2] + 10.0  # above the head, not on it
             page.locator("#tab-3d").click()
             page.wait_for_timeout(3000)  # let the client draw the new view
             SHOTS.mkdir(parents=True, exist_ok=True)
             page.screenshot(path=str(SHOTS / "follow_3d.png"))
             page.locator("#tab-map").click()
-            # Esc clears the selection and the scene stops following.
+            # Esc clears the first page's selection: its scene stops, the other goes on.
             with page.expect_request(
                 lambda r: r.method == "PUT" and r.url.endswith("/api/scene3d/follow")
             ) as req:
                 page.keyboard.press("Escape")
-            assert req.value.post_data_json == {"track_id": None}
-            poll(lambda: c.get("/api/scene3d/follow").json()["track_id"] is None)
+            assert req.value.post_data_json == {"track_id": None, "session": s1}
+            poll(lambda: c.get("/api/scene3d/follow", params={"session": s1}).json()["track_id"]
+                 is None)  # fmt: skip
             assert "hidden" in page.locator("#follow-3d").get_attribute("class")
+            assert c.get("/api/scene3d/follow", params={"session": s2}).json()["track_id"] == t2
         assert page.record.errors == [], page.record.errors
+        assert errors2 == [], errors2
         assert page.record.off_loopback() == []
     finally:
+        other.close()
         srv.stop()
 
 

@@ -172,3 +172,83 @@ def test_target_height_and_range_reach_every_layer_and_the_drawn_outlines(page, 
     others = [e for e in page.record.errors if refused not in e]
     assert others == [] and len(page.record.errors) == refused_requests
     assert page.record.off_loopback() == []
+
+
+KEY = "demtrack.visibility.params"  # visibility.mjs PARAMS_KEY
+DEFAULTS = {"target": "human", "target_height_m": 1.7, "max_range_m": 1000}
+
+
+def form(page) -> dict:
+    """What the parameter group shows, and what the layers would ask for."""
+    return page.evaluate(
+        """() => ({target: document.querySelector('#vis-target').value,
+                   height: document.querySelector('#vis-height').value,
+                   heightOff: document.querySelector('#vis-height').disabled,
+                   range: document.querySelector('#vis-range').value,
+                   params: window.demtrack.ui.vis.params})"""
+    )
+
+
+def stored(page):
+    return page.evaluate(f"localStorage.getItem('{KEY}')")
+
+
+def test_parameters_survive_a_reload_and_bad_stored_values_give_the_defaults(page, server_factory):
+    import json
+
+    srv = server_factory("vispersist")
+    open_console(page, srv)
+    assert stored(page) is None and form(page)["params"] == DEFAULTS
+    # A preset and a range, applied with every layer off (nothing is asked), are kept.
+    set_params(page, "vehicle", None, "400")
+    want = {"target": "vehicle", "target_height_m": TARGET_HEIGHT_M["vehicle"], "max_range_m": 400}
+    assert json.loads(stored(page)) == want
+    open_console(page, srv)  # reload
+    assert form(page) == {"target": "vehicle", "height": str(TARGET_HEIGHT_M["vehicle"]),
+                          "heightOff": True, "range": "400", "params": want}  # fmt: skip
+    assert layer_requests(page) == []
+    # A custom height: after a reload the form has it and the layers ask with it.
+    set_params(page, "custom", "3", "600")
+    open_console(page, srv)
+    custom = {"target": "custom", "target_height_m": 3, "max_range_m": 600}
+    assert form(page) == {"target": "custom", "height": "3", "heightOff": False,
+                          "range": "600", "params": custom}  # fmt: skip
+    page.locator("#layer-blindspots").check()
+    page.wait_for_function("window.demtrack.ui.vis.status.blindspots === 'ready'", timeout=180_000)
+    assert page.locator("[data-used='blindspots']").text_content() == (
+        "shown: custom 3 m · range 600 m"
+    )
+    [(path, query)] = layer_requests(page)
+    assert path == "/api/site/coverage.json"
+    assert (query["target_height_m"], query["max_range_m"]) == ("3", "600")
+    # A set the server refuses is not kept: the next load starts from the defaults.
+    set_params(page, "custom", "2", "200000")
+    page.wait_for_function(
+        "document.querySelector('#vis-params-status').textContent.startsWith('server refused')",
+        timeout=60_000,
+    )
+    assert stored(page) is None
+    open_console(page, srv)
+    assert form(page) == {"target": "human", "height": "1.7", "heightOff": True,
+                          "range": "1000", "params": DEFAULTS}  # fmt: skip
+    # Corrupted or ill-typed stored values: the defaults, quietly, and the value goes.
+    for bad in (
+        "{not json",
+        "null",
+        "[1, 2]",
+        json.dumps({"target": "custom", "target_height_m": "3", "max_range_m": 600}),
+        json.dumps({"target": "custom", "target_height_m": -1, "max_range_m": 600}),
+        json.dumps({"target": "boat", "target_height_m": 1, "max_range_m": 600}),
+        json.dumps({"target": "vehicle", "target_height_m": 1.5, "max_range_m": 0}),
+    ):
+        page.evaluate("([k, v]) => localStorage.setItem(k, v)", [KEY, bad])
+        open_console(page, srv)
+        got = form(page)
+        assert got["params"] == DEFAULTS and got["target"] == "human", bad
+        assert (got["height"], got["range"]) == ("1.7", "1000"), bad
+        assert stored(page) is None, bad
+    page.screenshot(path=str(SHOTS / "visibility_params_reloaded.png"))
+    # The only console error: the browser's own log of the one refused request.
+    assert len(page.record.errors) == 1, page.record.errors
+    assert "the server responded with a status of 422" in page.record.errors[0]
+    assert page.record.off_loopback() == []

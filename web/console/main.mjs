@@ -10,7 +10,7 @@ import * as api from "./api.mjs";
 import { BOX_WINDOW_S, CameraPanel } from "./cameras.mjs";
 import { drawSpeed, geoDetail, trackDetail } from "./detail.mjs";
 import { FORMATS, renderMarkers, renderTracks } from "./export.mjs";
-import { SceneFollow } from "./follow.mjs";
+import { SceneFollow, viserFrameUrl } from "./follow.mjs";
 import { bufferCovers, PastBoxes } from "./history.mjs";
 import { SiteMap } from "./map.mjs";
 import { firstT, lastT, positionAt, Store, trackParts } from "./store.mjs";
@@ -757,7 +757,7 @@ function showTab(which) {
   $("#view-3d").classList.toggle("on", is3d);
   const frame = $("#viser");
   if (is3d && ui.viserUrl) {
-    if (!frame.src) frame.src = ui.viserUrl;
+    if (!frame.src) frame.src = viserFrameUrl(ui.viserUrl, ui.follow3d.session);
     frame.hidden = false;
     $("#no-3d").classList.add("hidden");
   } else if (is3d) {

@@ -15,6 +15,11 @@
 // "Visibility parameters" group; applying it re-asks the layers that are shown (the others
 // when next shown). Every load carries a generation number: an answer for parameters that
 // are no longer current is dropped, and its requests are aborted.
+//
+// The applied set is kept in localStorage (PARAMS_KEY) across reloads. What is read back
+// is checked like the form's input; anything else (absent, not JSON, wrong types, out of
+// range) is removed and the defaults are used. A set the server refuses (422) is removed
+// too, so a reload never starts with a refusal.
 
 /* global ol */
 import * as api from "./api.mjs";
@@ -30,6 +35,8 @@ export const TARGETS = [
 /** The parameters the layers start with (the server's defaults). */
 export const DEFAULT_PARAMS = Object.freeze({ target: "human", target_height_m: 1.7, max_range_m: 1000 });
 const LAYERS = ["visibility", "viewsheds", "blindspots"];
+/** The localStorage key of the operator's parameter set. */
+export const PARAMS_KEY = "demtrack.visibility.params";
 const BLIND_COLOUR = "#ff4040";
 
 /** The query string of a parameter set. */
@@ -54,6 +61,50 @@ export function parseParams(target, heightText, rangeText) {
   if (!Number.isFinite(h) || h < 0) return { error: "target height: give a number of metres, 0 or more" };
   if (!Number.isFinite(r) || r <= 0) return { error: "range: give a positive number of metres" };
   return { params: { target: preset ? target : "custom", target_height_m: h, max_range_m: r } };
+}
+
+/**
+ * The stored parameter set, checked: {target, target_height_m, max_range_m}, or null when
+ * there is none or it is not valid (which is then removed). Never throws.
+ */
+export function loadParams(storage = globalThis.localStorage) {
+  let raw = null;
+  try {
+    raw = storage ? storage.getItem(PARAMS_KEY) : null;
+  } catch {
+    return null; // storage refused (privacy settings): defaults
+  }
+  if (raw === null) return null;
+  let v = null;
+  try {
+    v = JSON.parse(raw);
+  } catch {
+    v = null;
+  }
+  const ok = v !== null && typeof v === "object" && typeof v.target === "string"
+    && (v.target === "custom" || TARGETS.some((t) => t.cls === v.target))
+    && typeof v.target_height_m === "number" && typeof v.max_range_m === "number";
+  const got = ok ? parseParams(v.target, String(v.target_height_m), String(v.max_range_m)) : {};
+  if (!got.params) forgetParams(storage);
+  return got.params || null;
+}
+
+/** Keep a parameter set for the next page load (quietly does nothing if storage fails). */
+export function saveParams(p, storage = globalThis.localStorage) {
+  try {
+    storage?.setItem(PARAMS_KEY, JSON.stringify({ target: p.target, target_height_m: p.target_height_m, max_range_m: p.max_range_m }));
+  } catch {
+    /* full or refused: the choice lasts this page only */
+  }
+}
+
+/** Drop the stored parameter set. */
+export function forgetParams(storage = globalThis.localStorage) {
+  try {
+    storage?.removeItem(PARAMS_KEY);
+  } catch {
+    /* refused: nothing stored either */
+  }
 }
 
 function rgba(c) {
@@ -91,7 +142,7 @@ export class VisibilityLayers {
     for (const l of [this.coverage, this.viewsheds, this.blind]) siteMap.map.addLayer(l);
     this.status = { visibility: "off", viewsheds: "off", blindspots: "off" };
     this.loading = {};
-    this.params = { ...DEFAULT_PARAMS }; // what the next loads ask for
+    this.params = loadParams() || { ...DEFAULT_PARAMS }; // what the next loads ask for
     this.used = { visibility: null, viewsheds: null, blindspots: null }; // what each layer shows
     this.gen = 0; // bumped by every apply(): answers of older generations are dropped
     this.abort = new AbortController();
@@ -140,6 +191,7 @@ export class VisibilityLayers {
           if (ctx.gen !== this.gen) return;
           if (this.loading[name] === p) this.loading[name] = null;
           const why = err.status === 422 ? `server refused: ${err.detail}` : err.detail || err.message || String(err);
+          if (err.status === 422) forgetParams(); // a reload starts from the defaults
           this.paramError = why;
           this.setStatus(name, `failed: ${why}`);
         });
@@ -158,6 +210,7 @@ export class VisibilityLayers {
     this.abort.abort();
     this.abort = new AbortController();
     this.params = { ...params };
+    saveParams(this.params);
     this.paramError = "";
     this.loading = {};
     this.summaryP = null;
