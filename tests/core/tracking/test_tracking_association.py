@@ -18,7 +18,8 @@ def _cands(points, sigma=1.0):
 
 
 def test_gate_is_the_chi2_quantile():
-    assert gate_d2(0.99) == pytest.approx(chi2.ppf(0.99, 2))
+    for prob in (1e-9, 0.1, 0.5, 0.9, 0.99, 0.999999):
+        assert gate_d2(prob) == pytest.approx(chi2.ppf(prob, 2), rel=1e-12)
     assert gate_d2(0.99) == pytest.approx(-2 * np.log(0.01))  # 2 dof closed form
     with pytest.raises(TrackingError):
         gate_d2(1.0)
