@@ -111,7 +111,7 @@ class Settings(BaseSettings):
     cors_origins: list[str] = Field(default_factory=list)
     max_body_bytes: int = Field(default=4 * 1024 * 1024, gt=0)
     max_ws_message_bytes: int = Field(default=64 * 1024, gt=0)
-    ws_queue_size: int = Field(default=1024, gt=0)
+    ws_queue_size: int = Field(default=4096, gt=0)
     ws_compression: bool = False
     max_batch: int = Field(default=10_000, gt=0)
     tracker_method: str = "kalman"
