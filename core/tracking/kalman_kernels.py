@@ -15,12 +15,55 @@ from numba import njit
 __all__ = ["predict_kernel", "rts_positions_kernel", "smoother_gain_kernel", "update_kernel"]
 
 
+# numpy's ``@`` and ``np.linalg.solve`` inside numba bind BLAS/LAPACK and took some 20 s
+# of CPU to compile cold (a cold console's first tracks waited for it); 4 x 4 loops compile
+# in well under a second each and are as fast on these sizes.
+
+
+@njit(cache=True, inline="always")
+def _abt(a, b, transpose_b):  # pragma: no cover - numba
+    """``a @ b`` (or ``a @ b.T``) for small 2-D arrays."""
+    n, m = a.shape[0], a.shape[1]
+    k = b.shape[0] if transpose_b else b.shape[1]
+    out = np.zeros((n, k))
+    for i in range(n):
+        for j in range(k):
+            acc = 0.0
+            for r in range(m):
+                acc += a[i, r] * (b[j, r] if transpose_b else b[r, j])
+            out[i, j] = acc
+    return out
+
+
+@njit(cache=True, inline="always")
+def _sandwich(f, p, q):  # pragma: no cover - numba
+    """``sym(F P F^T + Q)`` (each (4, 4))."""
+    out = _abt(_abt(f, p, False), f, True)
+    for i in range(4):
+        for j in range(4):
+            out[i, j] += q[i, j]
+    return _symmetric(out)
+
+
+@njit(cache=True, inline="always")
+def _symmetric(a):  # pragma: no cover - numba
+    """``0.5 (A + A^T)`` of a square array, as a new array."""
+    n = a.shape[0]
+    out = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = 0.5 * (a[i, j] + a[j, i])
+    return out
+
+
 @njit(cache=True)
 def predict_kernel(x, p, f, q):  # pragma: no cover - numba
     """``(F x, sym(F P F^T + Q))`` for state ``x`` (4,), covariance ``p`` (4, 4)."""
-    x_new = f @ x
-    p_new = f @ p @ f.T + q
-    return x_new, 0.5 * (p_new + p_new.T)
+    x_new = np.zeros(4)
+    for i in range(4):
+        for j in range(4):
+            x_new[i] += f[i, j] * x[j]
+    return x_new, _sandwich(f, p, q)
 
 
 @njit(cache=True)
@@ -48,15 +91,49 @@ def update_kernel(x, p, z_xy, r):  # pragma: no cover - numba
     for a in range(4):
         ikh[a, 0] -= k[a, 0]
         ikh[a, 1] -= k[a, 1]
-    p_new = ikh @ p @ ikh.T + k @ r @ k.T
-    return x_new, 0.5 * (p_new + p_new.T)
+    p_new = _abt(_abt(ikh, p, False), ikh, True)
+    krk = _abt(_abt(k, r, False), k, True)
+    for i in range(4):
+        for j in range(4):
+            p_new[i, j] += krk[i, j]
+    return x_new, _symmetric(p_new)
 
 
 @njit(cache=True)
 def smoother_gain_kernel(p_k, f, q):  # pragma: no cover - numba
-    """Rauch-Tung-Striebel gain ``G = P_k F^T (F P_k F^T + Q)^-1`` (4, 4)."""
-    p_pred = f @ p_k @ f.T + q
-    return np.linalg.solve(p_pred, f @ p_k).T
+    """Rauch-Tung-Striebel gain ``G = P_k F^T (F P_k F^T + Q)^-1`` (4, 4).
+
+    ``G^T`` solves ``P_pred G^T = F P_k`` (``P_pred`` symmetric): Gaussian elimination
+    with partial pivoting on the 4 x 4 system and its four right-hand sides.
+    """
+    a = _abt(_abt(f, p_k, False), f, True)
+    for i in range(4):
+        for j in range(4):
+            a[i, j] += q[i, j]
+    b = _abt(f, p_k, False)
+    for c in range(4):
+        piv = c
+        for r in range(c + 1, 4):
+            if abs(a[r, c]) > abs(a[piv, c]):
+                piv = r
+        if piv != c:
+            for j in range(4):
+                a[c, j], a[piv, j] = a[piv, j], a[c, j]
+                b[c, j], b[piv, j] = b[piv, j], b[c, j]
+        for r in range(c + 1, 4):
+            m = a[r, c] / a[c, c]
+            for j in range(c, 4):
+                a[r, j] -= m * a[c, j]
+            for j in range(4):
+                b[r, j] -= m * b[c, j]
+    gain = np.empty((4, 4))  # G = (G^T)^T, back substitution column by column
+    for c in range(3, -1, -1):
+        for j in range(4):
+            acc = b[c, j]
+            for r in range(c + 1, 4):
+                acc -= a[c, r] * gain[j, r]
+            gain[j, c] = acc / a[c, c]
+    return gain
 
 
 @njit(cache=True)
@@ -68,9 +145,22 @@ def rts_positions_kernel(xs, fs, gains):  # pragma: no cover - numba
     """
     n = xs.shape[0]
     out = np.empty((n, 2))
-    s = xs[n - 1].copy()
-    out[n - 1] = s[:2]
-    for k in range(n - 2, -1, -1):
-        s = xs[k] + gains[k] @ (s - fs[k] @ xs[k])
-        out[k] = s[:2]
+    s = np.empty(4)
+    d = np.empty(4)
+    for i in range(4):
+        s[i] = xs[n - 1, i]
+    for k in range(n - 1, -1, -1):
+        if k < n - 1:
+            for i in range(4):
+                acc = 0.0
+                for j in range(4):
+                    acc += fs[k, i, j] * xs[k, j]
+                d[i] = s[i] - acc
+            for i in range(4):
+                acc = xs[k, i]
+                for j in range(4):
+                    acc += gains[k, i, j] * d[j]
+                s[i] = acc
+        out[k, 0] = s[0]
+        out[k, 1] = s[1]
     return out

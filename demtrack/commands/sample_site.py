@@ -103,7 +103,7 @@ def _live(args: argparse.Namespace) -> int:
     if (args.site / MANIFEST).exists():
         # The build left the light kernels in numba's cache; the fast ones may be missing
         # (a first run stopped early): the same low-priority child loads or compiles them.
-        server_warmer = KernelWarmers.start(["server"])
+        server_warmer = KernelWarmers.start(["tracker", "server"])
         try:
             use_light_kernels(True)
             return _serve_demo(args, args.site, live, t_start, server_warmer)
@@ -113,9 +113,10 @@ def _live(args: argparse.Namespace) -> int:
     # Cold start: the light kernels the build and the first page need compile in a child
     # beside the scan and the server imports; a second child, at the lowest CPU priority,
     # compiles the fast kernels, and the server's warm-up waits for it before it loads
-    # them and casts switch over (core.raycast.use_light_kernels).
+    # them and casts switch over (core.raycast.use_light_kernels); a third compiles the
+    # live tracker's kernels.
     warmers = KernelWarmers.start()
-    server_warmer = KernelWarmers.start(["server"])
+    server_warmer = KernelWarmers.start(["tracker", "server"])
     try:
         use_light_kernels(True)
         site_dir = ensure_sample_site(args.site, warmers=_ImportServerWhileWaiting(warmers))

@@ -18,9 +18,12 @@ the build meanwhile scans the world and grids the DEM and orthophoto, then waits
     The min/max pyramid kernel alone (the ``server`` job compiles it too).
 ``server``
     The fast kernels the console server's start-up warm-up loads (``cast_kernel``, the
-    all-hits re-walk, the pyramid, the run detector, the tracker's fusion and Kalman kernels);
-    started with ``cast`` at the lowest CPU priority, so it takes only the CPU the build
-    and the server's start leave.
+    all-hits re-walk, the pyramid, the run detector); started with ``cast`` at the lowest
+    CPU priority, so it takes only the CPU the build and the server's start leave.
+``tracker``
+    The live tracker's fusion and Kalman kernels (``core.tracking.warm``: about 10 s of CPU
+    cold). Started with ``server`` at a slightly lowered priority, so a cold console's
+    first tracks do not wait for the replay thread to compile them.
 
 The angular-index kernels are never compiled here. Each job compiles exactly the
 specialisations the build and the server use (the same dtypes, layouts and read-only
@@ -43,10 +46,10 @@ if TYPE_CHECKING:
 __all__ = ["JOBS", "KernelWarmers", "run_job"]
 
 #: Job names, in the order they are best started.
-JOBS = ("cast", "pyramid", "server")
+JOBS = ("cast", "pyramid", "tracker", "server")
 #: CPU priority (``nice``) of each job's process. The build waits for ``cast``: it keeps
 #: full priority beside the parent's scan; ``server`` only uses CPU nothing else wants.
-_NICE = {"cast": 0, "pyramid": 5, "server": 19}
+_NICE = {"cast": 0, "pyramid": 5, "tracker": 2, "server": 19}
 
 
 def _tiny_scene() -> tuple[Any, np.ndarray, Any, Any]:
@@ -88,14 +91,23 @@ def _job_server() -> None:
 
     from demtrack.core.camera import undistort_normalized_nb
     from demtrack.core.raycast import warm_up
-    from demtrack.core.tracking.warm import warm_up as warm_tracker
 
     warm_up(angular=False)  # what server.app warms at start-up, angular index excluded
     undistort_normalized_nb(np.array([0.1]), np.array([0.1]), -0.04, 0.0, 0.0, 0.0, 0.0)
-    warm_tracker()
 
 
-_JOB_FUNCS = {"cast": _job_cast, "pyramid": _job_pyramid, "server": _job_server}
+def _job_tracker() -> None:
+    from demtrack.core.tracking.warm import warm_up
+
+    warm_up()
+
+
+_JOB_FUNCS = {
+    "cast": _job_cast,
+    "pyramid": _job_pyramid,
+    "tracker": _job_tracker,
+    "server": _job_server,
+}
 
 
 def run_job(name: str) -> None:
