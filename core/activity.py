@@ -16,9 +16,10 @@ Rendezvous
     below ``stop_speed_mps``) for at least ``min_duration_s``.
 Convoy
     A follower drives along the path its leader drove, within ``path_tolerance_m`` of it,
-    a steady time lag behind (between ``min_lag_s`` and ``max_lag_s``, varying by at most
-    ``lag_tolerance`` of its median), for at least ``min_distance_m``. Pairs that share a
-    vehicle and overlap in time join into one convoy.
+    a steady time lag behind (between ``min_lag_s`` and ``max_lag_s``; its running median
+    over ``lag_window_s`` either side varies by at most ``lag_tolerance`` of the median lag
+    + 1 s), for at least ``min_distance_m``. Pairs that share a vehicle and overlap in time
+    join into one convoy.
 Zone crossing
     A target's position passes into (``zone-enter``) or out of (``zone-leave``) a polygon;
     the time is interpolated to the boundary.
@@ -118,7 +119,15 @@ class RendezvousParams:
 
 @dataclass(frozen=True)
 class ConvoyParams:
-    """Convoy: follow the leader's path with a steady lag for ``min_distance_m``."""
+    """Convoy: follow the leader's path with a steady lag for ``min_distance_m``.
+
+    The steadiness test reads the lag's running median over ``lag_window_s`` either side
+    of each point (s), not the pointwise lag: where the leader's path crosses itself (a
+    turn at a junction), the nearest point of the path to a follower's fix near the
+    crossing can lie on the other pass, and that fix's lag is off by the time between
+    the passes. The follower is near the crossing for a moment (a fraction of a second at
+    driving speed), while a real change of lag builds up over seconds.
+    """
 
     path_tolerance_m: float = 5.0
     min_lag_s: float = 0.5
@@ -126,6 +135,7 @@ class ConvoyParams:
     lag_tolerance: float = 0.5
     min_distance_m: float = 100.0
     min_speed_mps: float = 1.0
+    lag_window_s: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -249,6 +259,23 @@ def _step_s(t: np.ndarray) -> float:
         return med
     steps = steps[steps > 0]
     return float(np.median(steps)) if len(steps) else 1.0
+
+
+def _running_median(t: np.ndarray, x: np.ndarray, half_s: float) -> np.ndarray:
+    """Median of ``x`` over the points within ``half_s`` of each point's time, shape (n,).
+
+    ``t`` (n,) non-decreasing (s); the window of point ``i`` holds every ``j`` with
+    ``t[i] - half_s <= t[j] <= t[i] + half_s`` (``i`` included, cut at the ends).
+    """
+    if not len(t):
+        return np.zeros(0)
+    lo = np.searchsorted(t, t - half_s, side="left")
+    hi = np.searchsorted(t, t + half_s, side="right")
+    idx = lo[:, None] + np.arange(int(np.max(hi - lo)))
+    # windows padded with +inf, sorted: each row's first hi - lo values are its window
+    rows = np.sort(np.where(idx < hi[:, None], x[np.minimum(idx, len(t) - 1)], np.inf), axis=1)
+    count, k = hi - lo, np.arange(len(t))
+    return (rows[k, (count - 1) // 2] + rows[k, count // 2]) / 2
 
 
 def _speed(p: np.ndarray, dt: float) -> np.ndarray:
@@ -388,7 +415,9 @@ def _follow_stretches(
     Returns ``(t_start, t_end, median_lag_s, distance_m)`` per stretch. ``cand`` (n,)
     marks the follower's points that pass the cheap necessary conditions
     (:func:`_candidates`); the exact test (distance to the leader's path, lag) runs on
-    those only, and every other point fails it.
+    those only, and every other point fails it. A run of passing points is steady when
+    the running median of its lags (:func:`_running_median`, ``lag_window_s``) stays
+    within ``lag_tolerance`` of the run's median lag + 1 s.
     """
     tl, tf, pf = leader.t, follower.t, follower.p
     idx = np.flatnonzero(cand)
@@ -407,13 +436,20 @@ def _follow_stretches(
     )
     out = []
     for a, b in _runs(ok):
+        dist = float(np.sum(np.hypot(*np.diff(pf[a:b, :2], axis=0).T)))
+        if dist < params.min_distance_m:
+            continue
         lags = lag[a:b]
         med = float(np.median(lags))
-        if np.max(np.abs(lags - med)) > params.lag_tolerance * med + 1.0:
+        tol = params.lag_tolerance * med + 1.0
+        # a window's median lies between its extremes: when every lag is within the
+        # tolerance, so is every running median, and it need not be computed
+        if (
+            np.max(np.abs(lags - med)) > tol
+            and np.max(np.abs(_running_median(tf[a:b], lags, params.lag_window_s) - med)) > tol
+        ):
             continue
-        dist = float(np.sum(np.hypot(*np.diff(pf[a:b, :2], axis=0).T)))
-        if dist >= params.min_distance_m:
-            out.append((float(tf[a]), float(tf[b - 1]), med, dist))
+        out.append((float(tf[a]), float(tf[b - 1]), med, dist))
     return out
 
 

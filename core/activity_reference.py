@@ -138,9 +138,12 @@ def _follow_stretches_reference(
     )
     out = []
     for a, b in _runs(ok):
-        lags = lag[a:b]
+        lags, tr = lag[a:b], tf[a:b]
         med = float(np.median(lags))
-        if np.max(np.abs(lags - med)) > params.lag_tolerance * med + 1.0:
+        # running median, one window at a time
+        w = params.lag_window_s
+        local = [np.median(lags[(tr >= ti - w) & (tr <= ti + w)]) for ti in tr]
+        if np.max(np.abs(np.asarray(local) - med)) > params.lag_tolerance * med + 1.0:
             continue
         dist = float(np.sum(np.hypot(*np.diff(pf[a:b, :2], axis=0).T)))
         if dist >= params.min_distance_m:

@@ -104,6 +104,26 @@ def test_following_for_a_short_distance_is_not_a_convoy():
     assert detect_convoys([lead, joins_late], ConvoyParams(min_distance_m=150.0)) == []
 
 
+# East, a loop to the north, then south across the first leg at (20, 0).
+CROSSING = [(-100.8, 0), (50, 0), (50, 20), (20, 20), (20, -100)]
+
+
+def test_convoy_across_its_own_path_is_steady():
+    # The follower keeps 3 s behind, 0.3 m east and 0.2 m north of the leader's line. Its
+    # fix at the crossing, (20.3, 0.2) on the southbound leg, lies 0.2 m from the leader's
+    # eastbound pass and 0.3 m from its southbound one: the nearest point of the path is
+    # on the wrong pass, 12.5 s earlier, and that one fix's lag is 15.5 s.
+    lead = walk(1, CROSSING, [8.0] * 4, dt=0.2)
+    follow = walk(2, CROSSING, [8.0] * 4, t0=3.0, dt=0.2)
+    follow.p_enu[:, :2] += (0.3, 0.2)
+    (e,) = detect_convoys([lead, follow])
+    assert e.track_ids == (1, 2)
+    assert e.details["lags_s"] == [pytest.approx(3.0, abs=0.1)]
+    assert e.details["distance_m"] > 300
+    # Read pointwise (no running median), that one fix breaks the whole 320 m stretch.
+    assert detect_convoys([lead, follow], ConvoyParams(lag_window_s=0.0)) == []
+
+
 def test_zone_entry_and_exit_times_are_interpolated_to_the_boundary():
     zone = Zone("gate", shapely.box(40, -5, 60, 5))
     car = walk(7, [(0, 0), (100, 0)], [10.0], dt=1.0)

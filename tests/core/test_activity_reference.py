@@ -205,3 +205,37 @@ def test_convoy_of_tracks_with_repeated_times_needs_no_division_by_zero():
         assert as_tuples(found) == as_tuples(detect_convoys_reference(cars))
     assert [e.track_ids for e in found] == [(1, 2)]
     assert np.median(found[0].details["lags_s"]) == pytest.approx(4.0, abs=0.5)
+
+
+def test_running_median_matches_one_window_at_a_time():
+    """The lag's running median (``lag_window_s`` either side), vectorised, against a loop,
+    on irregular times with repeats (fused tracks) and windows cut at the ends."""
+    from demtrack.core.activity import _running_median
+
+    rng = np.random.default_rng(5)
+    t = np.sort(np.round(rng.uniform(0, 20, 120), 1))  # rounding repeats some times
+    x = rng.normal(3.0, 1.0, len(t))
+    for half in (0.0, 0.3, 1.0, 50.0):
+        loop = [np.median(x[(t >= ti - half) & (t <= ti + half)]) for ti in t]
+        np.testing.assert_array_equal(_running_median(t, x, half), loop)
+    alone = np.ones(len(t), bool)
+    alone[1:] &= np.diff(t) > 0
+    alone[:-1] &= np.diff(t) > 0
+    assert alone.any() and not alone.all()
+    np.testing.assert_array_equal(_running_median(t, x, 0.0)[alone], x[alone])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_pruned_convoys_match_all_pairs_where_the_route_crosses_itself(seed):
+    """A route that loops back across itself (the nearest point of the leader's path to a
+    fix near the crossing can be the other pass), cars at various lags, with jitter."""
+    rng = np.random.default_rng(seed)
+    way = np.array([[-100.0, 0.0], [50.0, 0.0], [50.0, 20.0], [20.0, 20.0], [20.0, -100.0]])
+    way += rng.uniform(-50, 50, 2)
+    cars = [
+        drive(k + 1, "vehicle", way, 8.0, t0, 0.2, rng, jitter=0.3)
+        for k, t0 in enumerate(np.cumsum(rng.uniform(1.0, 6.0, 3)))
+    ]
+    for cp in (ConvoyParams(), ConvoyParams(lag_window_s=0.0), LOOSE_CONVOY):
+        assert as_tuples(detect_convoys(cars, cp)) == as_tuples(detect_convoys_reference(cars, cp))
+    assert [len(e.track_ids) for e in detect_convoys(cars)] == [3]
