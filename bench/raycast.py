@@ -15,7 +15,9 @@ to a plain RSS difference (a lower bound).
 Camera rays (one origin per camera) are cast with per-origin angular indexes
 (``core.angular_index``); their build is timed apart ("set-up per camera") and the
 casts reuse them, as a console reuses a fixed camera's index for every frame. The camera
-set is also cast with the pyramid walk alone ("pyramid only") for comparison.
+set is also cast with the pyramid walk alone ("pyramid only") for comparison. Last, the
+camera set is cast on one thread by each engine in turns and timed in CPU time per ray (a
+shared machine skews the wall-clock rates at several threads more than the CPU time on one).
 
 Usage: ``demtrack bench raycast [--size 2000] [--rays 1000000] [--threads 2]``.
 """
@@ -23,6 +25,7 @@ Usage: ``demtrack bench raycast [--size 2000] [--rays 1000000] [--threads 2]``.
 from __future__ import annotations
 
 import argparse
+import functools
 import gc
 import time
 from collections.abc import Callable
@@ -78,6 +81,27 @@ class _PeakMemory:
             self.sample()
 
 
+def _cpu_one_thread(casts: dict, repeat: int, n: int) -> dict:
+    """Least CPU time per ray (ns, ``time.process_time``) of each cast, on one thread.
+
+    ``casts`` maps a key to a callable casting ``n`` rays; the callables run in turns
+    (each round runs every one once), so load from other jobs falls on all of them alike.
+    """
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    best = dict.fromkeys(casts, np.inf)
+    try:
+        for _ in range(max(1, repeat)):
+            for key, fn in casts.items():
+                gc.collect()
+                t0 = time.process_time()
+                fn()
+                best[key] = min(best[key], time.process_time() - t0)
+    finally:
+        numba.set_num_threads(threads)
+    return {key: t / n * 1e9 for key, t in best.items()}
+
+
 def _best(fn: Callable[[], object], repeat: int) -> tuple[float, object]:
     best, out = np.inf, None
     for _ in range(max(1, repeat)):
@@ -99,6 +123,7 @@ class _Result:
     rate: dict | None = None  # (set, mode) -> rays/s
     first_points: dict | None = None  # set -> (n, 3), NaN where no hit
     n_hits_all: dict | None = None  # set -> total crossings in mode "all"
+    casts: dict | None = None  # mode -> callable casting the camera set (1-thread timing)
 
 
 # ---------------------------------------------------------------------- engines
@@ -143,6 +168,11 @@ def _run_ours(dem: SyntheticDem, sets: dict, repeat: int) -> _Result:
                 del hits
         mem.sample()
     res.memory_mb = mem.peak_mb
+    o, d = sets["camera"]
+    res.casts = {
+        mode: functools.partial(caster.cast, o, d, mode=mode, coherent=True)
+        for mode in ("first", "all")
+    }
     return res
 
 
@@ -197,6 +227,10 @@ def _run_open3d(o3d, dem: SyntheticDem, sets: dict, threads: int, repeat: int) -
             del ans
         mem.sample()
     res.memory_mb = mem.peak_mb
+    res.casts = {
+        "first": functools.partial(scene.cast_rays, rays["camera"], nthreads=1),
+        "all": functools.partial(scene.list_intersections, rays["camera"], nthreads=1),
+    }
     return res
 
 
@@ -212,6 +246,7 @@ def _report(
     ours: _Result,
     theirs: _Result | None,
     why_not: str,
+    cpu: dict | None = None,
 ) -> None:
     n = args.rays
     print(
@@ -290,6 +325,16 @@ def _report(
             )
     if theirs is None:
         return
+    if cpu:
+        for mode in ("first", "all"):
+            a, b = cpu["ours", mode], cpu["theirs", mode]
+            row(
+                f"camera, {mode}, 1 thread CPU/ray",
+                f"{a:.0f} ns",
+                f"{b:.0f} ns",
+                f"{b / a:.2f}",
+                "(process time, same rays)",
+            )
     print(
         "agreement of first hits (same rays; Embree hits the 2-triangle mesh, demtrack "
         "the bilinear patches, so points differ where a patch is twisted):"
@@ -362,7 +407,15 @@ def main(argv: list[str] | None = None) -> int:
 
     ours = _run_ours(dem, sets, args.repeat)
     theirs = _run_open3d(o3d, dem, sets, args.threads, args.repeat) if o3d else None
-    _report(args, dem, sets, ours, theirs, why_not)
+    cpu = None
+    if theirs is not None and ours.casts and theirs.casts:
+        # One thread, CPU time, the engines in turns: the per-ray cost without the
+        # scheduling of a shared machine, which skews the rates at several threads.
+        engines = (("ours", ours.casts), ("theirs", theirs.casts))
+        cpu = _cpu_one_thread(
+            {(eng, m): fn for eng, c in engines for m, fn in c.items()}, args.repeat, args.rays
+        )
+    _report(args, dem, sets, ours, theirs, why_not, cpu)
     return 0
 
 

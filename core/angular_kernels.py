@@ -31,8 +31,11 @@ import numpy as np
 from numba import njit, prange
 
 from .raycast_kernels import (
+    BELOW_GROUND,
     HIT,
     MISS,
+    OUTSIDE,
+    UPWARD,
     _prepare,
     _walk,
     keep_root,
@@ -45,6 +48,7 @@ __all__ = [
     "azimuth_bins_kernel",
     "origin_runs_kernel",
     "cast_angular_kernel",
+    "cast_angular_refill_kernel",
     "next_candidate",
     "pseudo_angle",
     "slope_class",
@@ -362,8 +366,12 @@ def slope_class_edge(q, n_q, s_unit):  # pragma: no cover - numba
 
 
 @njit(cache=True, inline="always")
-def _next_candidate(tr, t_off, t_size, b, b_end, s):  # pragma: no cover - numba
-    """First leaf ``>= b`` and ``<= b_end`` whose bounds contain ``s``; ``b_end + 1`` if none."""
+def _next_candidate(tree, sl, t_off, t_size, b, b_end, s):  # pragma: no cover - numba
+    """First leaf ``>= b`` and ``<= b_end`` of slot ``sl``'s tree whose bounds contain ``s``.
+
+    ``b_end + 1`` if none. The slot is indexed in place (``tree[sl, k, 0]``) rather than
+    taken as a view per ray, so no per-ray array object is made.
+    """
     top = t_off.shape[0] - 1
     lv = 0
     i = b
@@ -371,7 +379,7 @@ def _next_candidate(tr, t_off, t_size, b, b_end, s):  # pragma: no cover - numba
         if (i << lv) > b_end:
             return b_end + 1
         k = t_off[lv] + i
-        if tr[k, 0] >= s and tr[k, 1] <= s:
+        if tree[sl, k, 0] >= s and tree[sl, k, 1] <= s:
             if lv == 0:
                 return i
             lv -= 1
@@ -434,8 +442,8 @@ def origin_runs_kernel(origins, min_run):  # pragma: no cover - numba
 
 @njit(cache=True)
 def next_candidate(tr, t_off, t_size, b, b_end, s):  # pragma: no cover - numba
-    """Callable form of the tree query (for tests)."""
-    return _next_candidate(tr, t_off, t_size, b, b_end, s)
+    """Callable form of the tree query on one slot's tree ``tr`` (for tests)."""
+    return _next_candidate(tr.reshape((1, tr.shape[0], 2)), 0, t_off, t_size, b, b_end, s)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -512,6 +520,197 @@ def _walk_cells(
     return count, crossed, last_t, stop
 
 
+@njit(cache=True, error_model="numpy")
+def _origin_below(elev, nodes, lvl_off, lvl_shape, gx0, gy0, oz):  # pragma: no cover - numba
+    """``raycast_kernels._prepare``'s below-ground test, which depends on the origin only."""
+    nrows, ncols = elev.shape
+    if gx0 >= 0.0 and gx0 <= ncols - 1.0 and gy0 >= 0.0 and gy0 <= nrows - 1.0:
+        ix = min(int(math.floor(gx0)), ncols - 2)
+        iy = min(int(math.floor(gy0)), nrows - 2)
+        lv = min(4, lvl_off.shape[0])
+        k = lvl_off[lv - 1] + (iy >> lv) * lvl_shape[lv - 1, 1] + (ix >> lv)
+        if oz < nodes[k, 0]:
+            e00 = elev[iy, ix]
+            e01 = elev[iy, ix + 1]
+            e10 = elev[iy + 1, ix]
+            e11 = elev[iy + 1, ix + 1]
+            if e00 == e00 and e01 == e01 and e10 == e10 and e11 == e11:
+                s = gx0 - ix
+                t = gy0 - iy
+                h = (
+                    e00 * (1.0 - s) * (1.0 - t)
+                    + e01 * s * (1.0 - t)
+                    + e10 * (1.0 - s) * t
+                    + e11 * s * t
+                )
+                if oz < h:
+                    return True
+    return False
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _prepare_shared(
+    nrows, ncols, cell, z_min, z_max, margin, gx0, gy0, oz, below, dx, dy, dz, max_range
+):  # pragma: no cover - numba
+    """``raycast_kernels._prepare`` for a ray from a run's common origin.
+
+    The origin's grid position ``gx0, gy0`` and its below-ground verdict ``below`` are
+    computed once per run; the rest is ``_prepare``'s arithmetic, operation for
+    operation, so the clipped stretch is the same to the bit. Returns ``(status, kx,
+    ky, uz, t_a, t_end)``.
+    """
+    norm = math.sqrt(dx * dx + dy * dy + dz * dz)
+    ux = dx / norm
+    uy = dy / norm
+    uz = dz / norm
+    kx = ux / cell
+    ky = -uy / cell
+    gxmax = ncols - 1.0
+    gymax = nrows - 1.0
+    t_lo = 0.0
+    t_hi = max_range
+    if kx != 0.0:
+        t1 = (0.0 - gx0) / kx
+        t2 = (gxmax - gx0) / kx
+        t_lo = max(t_lo, min(t1, t2))
+        t_hi = min(t_hi, max(t1, t2))
+    elif gx0 < 0.0 or gx0 > gxmax:
+        t_hi = -1.0
+    if ky != 0.0:
+        t1 = (0.0 - gy0) / ky
+        t2 = (gymax - gy0) / ky
+        t_lo = max(t_lo, min(t1, t2))
+        t_hi = min(t_hi, max(t1, t2))
+    elif gy0 < 0.0 or gy0 > gymax:
+        t_hi = -1.0
+    if not (t_lo <= t_hi):
+        return OUTSIDE, kx, ky, uz, 0.0, 0.0
+    if uz >= 0.0 and oz >= z_max:
+        return UPWARD, kx, ky, uz, 0.0, 0.0
+    if below:
+        return BELOW_GROUND, kx, ky, uz, 0.0, 0.0
+    zlo = z_min - margin
+    zhi = z_max + margin
+    if uz != 0.0:
+        t1 = (zlo - oz) / uz
+        t2 = (zhi - oz) / uz
+        t_lo = max(t_lo, min(t1, t2))
+        t_hi = min(t_hi, max(t1, t2))
+    elif oz < zlo or oz > zhi:
+        t_hi = -1.0
+    if not (t_lo <= t_hi):
+        return MISS, kx, ky, uz, 0.0, 0.0
+    return HIT, kx, ky, uz, t_lo, t_hi
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _cast_one(
+    elev,
+    nodes,
+    lvl_off,
+    lvl_shape,
+    margin,
+    gx0,
+    gy0,
+    z0,
+    kx,
+    ky,
+    uz,
+    t_a,
+    t_end,
+    tree,
+    t_off,
+    t_size,
+    slot_of_az,
+    d_rho,
+    start,
+    s_unit,
+    hits,
+    base,
+    cap,
+    max_hits,
+    first_only,
+):  # pragma: no cover - numba
+    """Walk one prepared ray (``_prepare`` said HIT) from the index's origin.
+
+    Through the angular index when the ray's azimuth bin is built, else the pyramid walk.
+    Returns ``(count, crossed, unbuilt)``: ``unbuilt`` is True for a non-vertical ray
+    whose azimuth bin is not built (it took the pyramid walk).
+    """
+    n_az = slot_of_az.shape[0]
+    hk = math.sqrt(kx * kx + ky * ky)
+    sl = -1
+    if hk > 0.0:
+        sl = slot_of_az[min(int(pseudo_angle(kx, ky) * (n_az / 4.0)), n_az - 1)]
+    if sl < 0:
+        cnt, cr = _walk(
+            elev,
+            nodes,
+            lvl_off,
+            lvl_shape,
+            margin,
+            gx0,
+            gy0,
+            z0,
+            kx,
+            ky,
+            uz,
+            t_a,
+            t_end,
+            hits,
+            base,
+            cap,
+            max_hits,
+            first_only,
+        )
+        return cnt, cr, hk > 0.0
+    n_r = t_size[0]
+    slope = uz / hk
+    step_t = d_rho / hk
+    b = max(
+        min(int(t_a * hk / d_rho), n_r - 1),
+        start[sl, slope_class(slope, start.shape[1], s_unit)],
+    )
+    b_end = min(int(t_end * hk / d_rho), n_r - 1)
+    cnt = 0
+    cr = False
+    last_t = -np.inf
+    while b <= b_end:
+        b = _next_candidate(tree, sl, t_off, t_size, b, b_end, slope)
+        if b > b_end:
+            break
+        e = b + 1
+        while e <= b_end and tree[sl, e, 0] >= slope and tree[sl, e, 1] <= slope:
+            e += 1
+        t1 = max(t_a, b * step_t - SPAN_SLACK_M)
+        t2 = min(t_end, e * step_t + SPAN_SLACK_M)
+        if t1 <= t2:
+            cnt, c2, last_t, stop = _walk_cells(
+                elev,
+                margin,
+                gx0,
+                gy0,
+                z0,
+                kx,
+                ky,
+                uz,
+                t1,
+                t2,
+                hits,
+                base,
+                cap,
+                max_hits,
+                first_only,
+                cnt,
+                last_t,
+            )
+            cr = cr or c2
+            if stop:
+                break
+        b = e
+    return cnt, cr, False
+
+
 @njit(parallel=True, cache=True, error_model="numpy")
 def cast_angular_kernel(
     elev,
@@ -544,6 +743,8 @@ def cast_angular_kernel(
     status,
     crossed,
     truncated,
+    unbuilt,
+    shared,
 ):  # pragma: no cover - numba
     """``raycast_kernels.cast_kernel`` for rays ``lo:hi``, which share the index's origin.
 
@@ -551,117 +752,192 @@ def cast_angular_kernel(
     float32 ``(n_slots, n_nodes, 2)``, ``t_off``/``t_size`` its level table,
     ``slot_of_az`` int32 ``(n_az,)``, ``d_rho`` range-bin width in cells, ``start``
     int32 ``(n_slots, n_q)`` and ``s_unit`` the slope classes' table). Rays whose
-    azimuth bin was not built, and vertical rays, take the pyramid walk.
+    azimuth bin was not built, and vertical rays, take the pyramid walk; ``unbuilt``
+    (int64 ``(nthreads,)``, out) counts the non-vertical ones per thread, so the caller
+    knows whether the index needs more bins. ``shared``: the rays really share
+    ``origins[lo]`` (a run), so the per-origin part of the set-up is done once; with
+    ``False`` (the rays between runs, with an index that has no bin built) each ray is
+    set up on its own.
     """
     cap = buf.shape[1]
     hits = buf.reshape(buf.size)
-    n_az = slot_of_az.shape[0]
-    kaz = n_az / 4.0
-    n_r = t_size[0]
-    n_q = start.shape[1]
+    nrows, ncols = elev.shape
     nblocks = (hi - lo + 63) // 64
+    shared = shared and hi > lo
+    gxs = 0.0
+    gys = 0.0
+    below = False
+    if shared:  # as in _prepare
+        gxs = (origins[lo, 0] - x_min) / cell - 0.5
+        gys = (y_max - origins[lo, 1]) / cell - 0.5
+        below = _origin_below(elev, nodes, lvl_off, lvl_shape, gxs, gys, origins[lo, 2])
     for th in prange(nthreads):
+        n_unbuilt = 0
         for blk in range(th, nblocks, nthreads):
             for i in range(lo + blk * 64, min(hi, lo + (blk + 1) * 64)):
-                st, gx0, gy0, kx, ky, uz, t_a, t_end = _prepare(
-                    elev,
-                    nodes,
-                    lvl_off,
-                    lvl_shape,
-                    x_min,
-                    y_max,
-                    cell,
-                    z_min,
-                    z_max,
-                    margin,
-                    origins[i, 0],
-                    origins[i, 1],
-                    origins[i, 2],
-                    directions[i, 0],
-                    directions[i, 1],
-                    directions[i, 2],
-                    max_range[i],
-                )
+                if shared:
+                    gx0 = gxs
+                    gy0 = gys
+                    st, kx, ky, uz, t_a, t_end = _prepare_shared(
+                        nrows,
+                        ncols,
+                        cell,
+                        z_min,
+                        z_max,
+                        margin,
+                        gxs,
+                        gys,
+                        origins[i, 2],
+                        below,
+                        directions[i, 0],
+                        directions[i, 1],
+                        directions[i, 2],
+                        max_range[i],
+                    )
+                else:
+                    st, gx0, gy0, kx, ky, uz, t_a, t_end = _prepare(
+                        elev,
+                        nodes,
+                        lvl_off,
+                        lvl_shape,
+                        x_min,
+                        y_max,
+                        cell,
+                        z_min,
+                        z_max,
+                        margin,
+                        origins[i, 0],
+                        origins[i, 1],
+                        origins[i, 2],
+                        directions[i, 0],
+                        directions[i, 1],
+                        directions[i, 2],
+                        max_range[i],
+                    )
                 crossed[i] = False
                 truncated[i] = False
                 counts[i] = 0
                 if st != HIT:
                     status[i] = st
                     continue
-                z0 = origins[i, 2]
-                hk = math.sqrt(kx * kx + ky * ky)
-                sl = -1
-                if hk > 0.0:
-                    sl = slot_of_az[min(int(pseudo_angle(kx, ky) * kaz), n_az - 1)]
-                if sl < 0:
-                    cnt, cr = _walk(
-                        elev,
-                        nodes,
-                        lvl_off,
-                        lvl_shape,
-                        margin,
-                        gx0,
-                        gy0,
-                        z0,
-                        kx,
-                        ky,
-                        uz,
-                        t_a,
-                        t_end,
-                        hits,
-                        i * cap,
-                        cap,
-                        max_hits,
-                        first_only,
-                    )
-                else:
-                    tr = tree[sl]
-                    slope = uz / hk
-                    step_t = d_rho / hk
-                    b = max(
-                        min(int(t_a * hk / d_rho), n_r - 1),
-                        start[sl, slope_class(slope, n_q, s_unit)],
-                    )
-                    b_end = min(int(t_end * hk / d_rho), n_r - 1)
-                    cnt = 0
-                    cr = False
-                    last_t = -np.inf
-                    while b <= b_end:
-                        b = _next_candidate(tr, t_off, t_size, b, b_end, slope)
-                        if b > b_end:
-                            break
-                        e = b + 1
-                        while e <= b_end and tr[e, 0] >= slope and tr[e, 1] <= slope:
-                            e += 1
-                        t1 = max(t_a, b * step_t - SPAN_SLACK_M)
-                        t2 = min(t_end, e * step_t + SPAN_SLACK_M)
-                        if t1 <= t2:
-                            cnt, c2, last_t, stop = _walk_cells(
-                                elev,
-                                margin,
-                                gx0,
-                                gy0,
-                                z0,
-                                kx,
-                                ky,
-                                uz,
-                                t1,
-                                t2,
-                                hits,
-                                i * cap,
-                                cap,
-                                max_hits,
-                                first_only,
-                                cnt,
-                                last_t,
-                            )
-                            cr = cr or c2
-                            if stop:
-                                break
-                        b = e
+                cnt, cr, ub = _cast_one(
+                    elev,
+                    nodes,
+                    lvl_off,
+                    lvl_shape,
+                    margin,
+                    gx0,
+                    gy0,
+                    origins[i, 2],
+                    kx,
+                    ky,
+                    uz,
+                    t_a,
+                    t_end,
+                    tree,
+                    t_off,
+                    t_size,
+                    slot_of_az,
+                    d_rho,
+                    start,
+                    s_unit,
+                    hits,
+                    i * cap,
+                    cap,
+                    max_hits,
+                    first_only,
+                )
+                if ub:
+                    n_unbuilt += 1
                 crossed[i] = cr
                 if cnt > max_hits:
                     truncated[i] = True
                     cnt = max_hits
                 counts[i] = cnt
                 status[i] = HIT if cnt > 0 else MISS
+        unbuilt[th] = n_unbuilt
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def cast_angular_refill_kernel(
+    elev,
+    nodes,
+    lvl_off,
+    lvl_shape,
+    x_min,
+    y_max,
+    cell,
+    z_min,
+    z_max,
+    margin,
+    origins,
+    directions,
+    max_range,
+    max_hits,
+    tree,
+    t_off,
+    t_size,
+    slot_of_az,
+    d_rho,
+    start,
+    s_unit,
+    rays,
+    offsets,
+    range_out,
+):  # pragma: no cover - numba
+    """Re-walk rays ``rays`` (int64; all from the index's origin) into their CSR slots.
+
+    ``raycast_kernels.cast_all_refill_kernel`` through the angular index: the same walk
+    as :func:`cast_angular_kernel`'s, so the same hits, all of them (up to ``max_hits``)
+    written to ``range_out[offsets[i]:offsets[i + 1]]``.
+    """
+    for q in prange(rays.shape[0]):
+        i = rays[q]
+        st, gx0, gy0, kx, ky, uz, t_a, t_end = _prepare(
+            elev,
+            nodes,
+            lvl_off,
+            lvl_shape,
+            x_min,
+            y_max,
+            cell,
+            z_min,
+            z_max,
+            margin,
+            origins[i, 0],
+            origins[i, 1],
+            origins[i, 2],
+            directions[i, 0],
+            directions[i, 1],
+            directions[i, 2],
+            max_range[i],
+        )
+        if st != HIT:
+            continue
+        _cast_one(
+            elev,
+            nodes,
+            lvl_off,
+            lvl_shape,
+            margin,
+            gx0,
+            gy0,
+            origins[i, 2],
+            kx,
+            ky,
+            uz,
+            t_a,
+            t_end,
+            tree,
+            t_off,
+            t_size,
+            slot_of_az,
+            d_rho,
+            start,
+            s_unit,
+            range_out,
+            offsets[i],
+            offsets[i + 1] - offsets[i],
+            max_hits,
+            False,
+        )

@@ -91,6 +91,10 @@ __all__ = [
 HEIGHT_MARGIN_M = 1e-3
 #: Hits kept per ray in the first pass of ``mode="all"``; rays with more are re-walked.
 _FIRST_PASS_HITS = 4
+#: The same when the batch has runs of one origin (camera rays): their re-walks cost more
+#: than the larger buffer (2 % of the bench's camera rays have more than 4 hits, 0.2 %
+#: more than 8; re-walking them was ~15 % of an all-hits cast at two threads).
+_FIRST_PASS_HITS_RUNS = 8
 #: Shortest run of consecutive rays sharing an origin that ``coherent=None`` casts with an
 #: angular index (building one costs about as much as casting ~50k rays without it).
 MIN_COHERENT_RUN = 20_000
@@ -308,7 +312,15 @@ class RayCaster:
         first = mode == "first"
         max_hits = 1 if first else int(max_hits)
         n = len(o)
-        cap = 1 if first else min(_FIRST_PASS_HITS, max_hits)
+        # Light kernels: an angular index only when asked for (its kernels are slow to
+        # compile); the answers are the same either way.
+        runs = (
+            _ak.origin_runs_kernel(o, 1 if coherent else MIN_COHERENT_RUN)
+            if n and (coherent or (coherent is None and not light))
+            else np.empty((0, 2), np.int64)
+        )
+        keep = _FIRST_PASS_HITS_RUNS if len(runs) else _FIRST_PASS_HITS
+        cap = 1 if first else min(keep, max_hits)
         buf = np.empty((n, cap), np.float64)
         counts = np.empty(n, np.int64)
         status = np.empty(n, np.int8)
@@ -332,34 +344,13 @@ class RayCaster:
         )
         with _threads_for(n):
             threads = numba.get_num_threads()
-            # Light kernels: an angular index only when asked for (its kernels are slow to
-            # compile); the answers are the same either way.
-            runs = (
-                _ak.origin_runs_kernel(o, 1 if coherent else MIN_COHERENT_RUN)
-                if n and (coherent or (coherent is None and not light))
-                else np.empty((0, 2), np.int64)
-            )
             outs = (buf, counts, status, crossed, truncated)
+            indexed: list[tuple[int, int, AngularIndex]] = []
             if len(runs) == 0:
                 cast_kernel = _lk.cast_kernel_light if light else _k.cast_kernel
                 cast_kernel(*args, first, max_hits, threads, *outs)
             else:
-                # Runs of one origin use its angular index; the rays between them take the
-                # pyramid walk (the same kernel with no azimuth bin built).
-                a = 0
-                ix: AngularIndex | SimpleNamespace
-                for r0, r1 in runs.tolist() + [[n, n]]:
-                    if a < r0:
-                        ix = _no_index()
-                        _ak.cast_angular_kernel(
-                            *args, first, max_hits, threads, *_index_args(ix), a, r0, *outs
-                        )
-                    if r0 < r1:
-                        ix = self._index_for(o[r0], d, r0, r1)
-                        _ak.cast_angular_kernel(
-                            *args, first, max_hits, threads, *_index_args(ix), r0, r1, *outs
-                        )
-                    a = r1
+                indexed = self._cast_runs(args, first, max_hits, threads, runs, outs)
             offsets = np.zeros(n + 1, np.int64)
             np.cumsum(counts, out=offsets[1:])
             m = int(offsets[-1])
@@ -374,9 +365,50 @@ class RayCaster:
                 if len(big) and light:
                     _recast_light(args, threads, big, max_hits, offsets, range_m, points)
                 elif len(big):
-                    _k.cast_all_refill_kernel(*args, max_hits, big, offsets, range_m)
+                    _refill(args, max_hits, big, offsets, range_m, indexed)
                     _k.hit_points_kernel(o, d, big, offsets, range_m, points)
         return RayHits(offsets, range_m, points, status, crossed, truncated)
+
+    def _cast_runs(
+        self,
+        args: tuple[Any, ...],
+        first: bool,
+        max_hits: int,
+        threads: int,
+        runs: np.ndarray,
+        outs: tuple[np.ndarray, ...],
+    ) -> list[tuple[int, int, AngularIndex]]:
+        """Cast runs of one origin with its angular index, the rays between them without.
+
+        A cached index is used as it is (no per-call pass over the directions); when the
+        kernel reports rays whose azimuth bin it lacks (they took the pyramid walk, with
+        the same answers) the index is extended for the next batch. Returns the runs and
+        the indexes they were cast with.
+        """
+        o, d = args[-3], args[-2]
+        n = len(o)
+        unbuilt = np.zeros(threads, np.int64)
+        indexed: list[tuple[int, int, AngularIndex]] = []
+        a = 0
+        for r0, r1 in runs.tolist() + [[n, n]]:
+            if a < r0:  # the pyramid walk: the same kernel with no azimuth bin built
+                nix = _index_args(_no_index())
+                _ak.cast_angular_kernel(  # type: ignore[call-arg]
+                    *args, first, max_hits, threads, *nix, a, r0, *outs, unbuilt, False
+                )
+            if r0 < r1:
+                ix = self.angular.get(o[r0])
+                if ix is None:
+                    ix = self._index_for(o[r0], d, r0, r1)
+                ixa = _index_args(ix)
+                _ak.cast_angular_kernel(  # type: ignore[call-arg]
+                    *args, first, max_hits, threads, *ixa, r0, r1, *outs, unbuilt, True
+                )
+                indexed.append((r0, r1, ix))
+                if unbuilt.any():
+                    self._index_for(o[r0], d, r0, r1)
+            a = r1
+        return indexed
 
 
 def _recast_light(
@@ -409,6 +441,32 @@ def _recast_light(
     slots = np.repeat(offsets[big] - sub_off[:-1], counts) + np.arange(m)
     range_m[slots] = sub_range
     points[slots] = sub_points
+
+
+def _refill(
+    args: tuple[Any, ...],
+    max_hits: int,
+    big: np.ndarray,
+    offsets: np.ndarray,
+    range_m: np.ndarray,
+    indexed: list[tuple[int, int, AngularIndex]],
+) -> None:
+    """Re-walk rays ``big`` (sorted) with all their hits, into their CSR slots.
+
+    Rays of an indexed run take the angular walk they were cast with; the rest the
+    pyramid walk. Either way the first pass's walk, so the same hits.
+    """
+    rest = np.ones(len(big), bool)
+    for r0, r1, ix in indexed:
+        i0, i1 = np.searchsorted(big, [r0, r1]).tolist()
+        if i0 < i1:
+            _ak.cast_angular_refill_kernel(  # type: ignore[call-arg]
+                *args, max_hits, *_index_args(ix), big[i0:i1], offsets, range_m
+            )
+            rest[i0:i1] = False
+    if rest.any():
+        left = big if rest.all() else big[rest]
+        _k.cast_all_refill_kernel(*args, max_hits, left, offsets, range_m)  # type: ignore[call-arg]
 
 
 @contextlib.contextmanager
@@ -579,26 +637,32 @@ def warm_up(angular: bool = True) -> None:
         _warm_angular(caster)
     # A level ray over a zig-zag crosses more often than the first pass keeps: this
     # compiles the re-walk kernel too.
-    zig = np.tile(np.array([0.0, 10.0], np.float32), 8)
-    zigzag = SimpleNamespace(grid=GridSpec(0.0, 2.0, 1.0, 2, 16), elevation=np.vstack([zig, zig]))
+    _zigzag_cast(None)
+    use_light_kernels(False)
+
+
+def _zigzag_cast(coherent: bool | None) -> None:
+    """A level ray over a zig-zag: 12 crossings, more than either first pass keeps."""
+    zig = np.tile(np.array([0.0, 10.0], np.float32), 12)
+    zigzag = SimpleNamespace(grid=GridSpec(0.0, 2.0, 1.0, 2, 24), elevation=np.vstack([zig, zig]))
     RayCaster.from_dem(zigzag)._cast(
         np.array([[0.5, 1.0, 5.0]]),
         np.array([[1.0, 0.0, 0.0]]),
         np.inf,
         "all",
         256,
-        None,
+        coherent,
         light=False,
     )
-    use_light_kernels(False)
 
 
 def _warm_angular(caster: RayCaster) -> None:
-    """Compile the angular-index kernels (build, cast, the walk between runs)."""
+    """Compile the angular-index kernels (build, cast, the walk between runs, re-walk)."""
     o3 = np.array([[2.0, 2.0, 100.0], [2.0, 2.0, 100.0], [0.5, 3.5, 100.0]])
     d3 = np.array([[0.1, 0.1, -1.0], [0.2, -0.1, -1.0], [0.0, 0.0, -1.0]])
     caster._cast(o3, d3, np.inf, "first", 256, True, light=False)
     caster._cast(o3, d3, np.inf, "all", 8, True, light=False)
+    _zigzag_cast(True)
 
 
 def _validate_rays(

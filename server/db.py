@@ -20,13 +20,15 @@ Tables
 ``activity``        detected events (loitering, rendezvous, convoy, zone crossings,
                     hand-off predictions, tracks confirmed / ended), one row per episode,
                     updated while it lasts (migration 2)
+``track_rev``       a version per track, renewed by triggers whenever its row is written
+                    (migration 3), so readers can cache decoded bodies by version
 """
 
 from __future__ import annotations
 
 import sqlite3
 import threading
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -123,8 +125,34 @@ def _m2_activity(conn: sqlite3.Connection) -> None:
     )
 
 
+def _m3_track_rev(conn: sqlite3.Connection) -> None:
+    # ``track_rev``: per track, a number that changes whenever its row is written (given
+    # by triggers, so the writers need not know; AUTOINCREMENT never reuses one), letting
+    # a reader cache decoded bodies by ``(id, rev)``. A separate small table: setting a
+    # column of ``tracks`` would rewrite the whole (large) row a second time. Tracks of an
+    # older file have no row (rev 0) until they are written again.
+    conn.execute("CREATE TABLE track_rev (rev INTEGER PRIMARY KEY AUTOINCREMENT, id INTEGER)")
+    conn.execute("CREATE UNIQUE INDEX track_rev_id ON track_rev(id)")
+    # Trigger bodies hold ``;``: one statement each, not through ``_run_script``. Delete,
+    # then insert: no conflict, whatever policy the statement that fires them has.
+    renew = " DELETE FROM track_rev WHERE id = NEW.id; INSERT INTO track_rev (id) VALUES (NEW.id);"
+    conn.execute(f"CREATE TRIGGER track_rev_insert AFTER INSERT ON tracks BEGIN{renew} END")
+    conn.execute(
+        "CREATE TRIGGER track_rev_update AFTER UPDATE ON tracks BEGIN"
+        f" DELETE FROM track_rev WHERE id = OLD.id;{renew} END"
+    )
+    conn.execute(
+        "CREATE TRIGGER track_rev_delete AFTER DELETE ON tracks BEGIN"
+        " DELETE FROM track_rev WHERE id = OLD.id; END"
+    )
+
+
 #: Ordered migrations; applying ``MIGRATIONS[k]`` takes the schema from version k to k + 1.
-MIGRATIONS: tuple[Callable[[sqlite3.Connection], None], ...] = (_m1_initial, _m2_activity)
+MIGRATIONS: tuple[Callable[[sqlite3.Connection], None], ...] = (
+    _m1_initial,
+    _m2_activity,
+    _m3_track_rev,
+)
 SCHEMA_VERSION = len(MIGRATIONS)
 
 
@@ -215,6 +243,34 @@ def _next_id(c: sqlite3.Connection, sql: str) -> int:
     """One more than the integer ``sql`` selects (1 when it selects nothing or NULL)."""
     row = c.execute(sql).fetchone()
     return 1 if row is None or row[0] is None else int(row[0]) + 1
+
+
+#: A track row's version (see migration 3); 0 for a row written before it.
+_REV = "COALESCE((SELECT rev FROM track_rev WHERE track_rev.id = tracks.id), 0)"
+
+
+def _track_where(
+    t_from: float | None,
+    t_to: float | None,
+    cls: str | None,
+    bbox: tuple[float, float, float, float] | None,
+) -> tuple[str, list[float | str]]:
+    """The ``WHERE`` clause and parameters of a track selection (time, class, box overlap)."""
+    clauses: list[str] = []
+    params: list[float | str] = []
+    if t_from is not None:
+        clauses.append("t_end >= ?")
+        params.append(t_from)
+    if t_to is not None:
+        clauses.append("t_start <= ?")
+        params.append(t_to)
+    if cls is not None:
+        clauses.append("cls = ?")
+        params.append(cls)
+    if bbox is not None:
+        clauses += ["e_max >= ?", "n_max >= ?", "e_min <= ?", "n_min <= ?"]
+        params += list(bbox)
+    return (" WHERE " + " AND ".join(clauses) if clauses else ""), params
 
 
 def _detection_row(r: Sequence[Any]) -> tuple[int, Detection]:
@@ -537,23 +593,46 @@ class Store:
         Only the coarse test is made here (time span and bounding box overlap); the
         caller clips the points.
         """
-        clauses: list[str] = []
-        params: list[float | str] = []
-        if t_from is not None:
-            clauses.append("t_end >= ?")
-            params.append(t_from)
-        if t_to is not None:
-            clauses.append("t_start <= ?")
-            params.append(t_to)
-        if cls is not None:
-            clauses.append("cls = ?")
-            params.append(cls)
-        if bbox is not None:
-            clauses += ["e_max >= ?", "n_max >= ?", "e_min <= ?", "n_min <= ?"]
-            params += list(bbox)
-        where = " WHERE " + " AND ".join(clauses) if clauses else ""
+        where, params = _track_where(t_from, t_to, cls, bbox)
         rows = self._rows(f"SELECT body FROM tracks{where} ORDER BY id", params)  # noqa: S608
         return [loads_json(r[0]) for r in rows]
+
+    def track_rows(
+        self,
+        known: Mapping[int, int],
+        *,
+        t_from: float | None = None,
+        t_to: float | None = None,
+        cls: str | None = None,
+        bbox: tuple[float, float, float, float] | None = None,
+    ) -> list[tuple[int, int, str | None]]:
+        """``(id, rev, body text)`` of the tracks :meth:`tracks` selects, by id.
+
+        The text is None for a track whose ``rev`` is ``known[id]`` (the caller holds
+        that version: ``rev``, from ``track_rev``, changes whenever the row is written),
+        so only new and changed bodies are read. Both reads see one snapshot of the file.
+        """
+        where, params = _track_where(t_from, t_to, cls, bbox)
+        with self._rlock:
+            self._r.execute("BEGIN")
+            try:
+                heads = self._r.execute(
+                    f"SELECT id, {_REV} FROM tracks{where} ORDER BY id",  # noqa: S608
+                    params,
+                ).fetchall()
+                todo = [i for i, rev in heads if known.get(i) != rev]
+                texts: dict[int, tuple[int, str]] = {}
+                for k in range(0, len(todo), 500):
+                    chunk = todo[k : k + 500]
+                    marks = ",".join("?" * len(chunk))
+                    for i, rev, body in self._r.execute(
+                        f"SELECT id, {_REV}, body FROM tracks WHERE id IN ({marks})",  # noqa: S608
+                        chunk,
+                    ):
+                        texts[i] = (rev, body)
+            finally:
+                self._r.execute("COMMIT")
+        return [(i, *texts[i]) if i in texts else (i, rev, None) for i, rev in heads]
 
     def track(self, track_id: int) -> dict[str, Any] | None:
         """The body of track ``track_id`` (None if there is none), by its primary key."""

@@ -21,7 +21,7 @@ __all__ = ["warm_up"]
 def _walk() -> list[Fix]:
     cams = {"a": np.array([-60.0, 0.0, 15.0]), "b": np.array([0.0, -70.0, 18.0])}
     cov = np.array([[[0.3, 0.05], [0.05, 0.6]], [[2.0, 0.0], [0.0, 2.0]]])
-    fixes = []
+    fixes: list[Fix] = []
     for k in range(16):
         target = np.array([0.8 * k, 0.4 * k, 0.0])
         for name, origin in cams.items():
@@ -34,8 +34,8 @@ def _walk() -> list[Fix]:
                     len(fixes),
                     origin,
                     target - origin,
-                    [crown, target],
-                    [1.4, 0.6],
+                    np.array([crown, target]),
+                    np.array([1.4, 0.6]),
                     hit_cov_en_m2=cov,
                 )
             )

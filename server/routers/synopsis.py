@@ -10,6 +10,8 @@ sensors picked the target up), together with the events of the window.
 from __future__ import annotations
 
 import math
+from bisect import bisect_left, bisect_right
+from functools import partial
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, HTTPException, Query
@@ -17,7 +19,8 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ..messages import EventBody
 from ..state import StateDep
-from .tracks import filter_tracks
+from ..track_cache import CachedTrack
+from .tracks import select_tracks
 
 __all__ = [
     "GapPart",
@@ -25,8 +28,12 @@ __all__ = [
     "SynopsisPoint",
     "TrackedPart",
     "Trajectory",
+    "assemble",
+    "cached_trajectory",
     "router",
     "synopsis",
+    "trajectory",
+    "trajectory_reference",
 ]
 
 router = APIRouter(prefix="/api/synopsis", tags=["synopsis"])
@@ -185,8 +192,12 @@ def _gap(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def trajectory(body: dict[str, Any], step_s: float) -> dict[str, Any]:
-    """A (clipped) stored track body split into tracked parts and gaps."""
+def trajectory_reference(body: dict[str, Any], step_s: float) -> dict[str, Any]:
+    """A (clipped) stored track body split into tracked parts and gaps (plain twin).
+
+    Pair by pair and point by point: :func:`trajectory`'s reference in the tests, and
+    what it falls back to when the points are not in time order.
+    """
     pts = body["points"]
     parts: list[dict[str, Any]] = []
     run = [pts[0]]
@@ -216,6 +227,117 @@ def trajectory(body: dict[str, Any], step_s: float) -> dict[str, Any]:
     }
 
 
+def _since(t0: float, t: float) -> float:
+    return t - t0
+
+
+def _path(pts: list[dict[str, Any]], t_s: list[float], r0: int, r1: int, step_s: float) -> list:
+    """``_tracked``'s path of ``pts[r0:r1]`` (times in order) by bisection.
+
+    The next point kept is the first whose ``t_s - last >= step_s``: that difference
+    never decreases along ordered times (rounding is monotonic), so it is bisected for.
+    """
+    path = [_point(pts[r0])]
+    k = last = r0
+    while True:
+        k = bisect_left(t_s, step_s, k + 1, r1, key=partial(_since, t_s[last]))
+        if k >= r1:
+            break
+        path.append(_point(pts[k]))
+        last = k
+    if last != r1 - 1:
+        path.append(_point(pts[r1 - 1]))
+    return path
+
+
+def _skeleton(body: dict[str, Any], t_s: list[float]) -> dict[str, Any]:
+    """:func:`trajectory` without paths (what does not depend on ``step_s``).
+
+    Tracked parts carry ``"_run": (r0, r1)`` (their point range) in place of ``path``.
+    ``t_s``: the times of ``body["points"]``, in order.
+    """
+    pts = body["points"]
+    n = len(pts)
+    # Pair (k, k + 1) lies in gap [g0, g1] iff t_s[k] >= g0 and t_s[k + 1] <= g1.
+    cuts = sorted(
+        {
+            k
+            for g0, g1 in body["gaps"]
+            for k in range(bisect_left(t_s, g0), min(bisect_right(t_s, g1) - 1, n - 1))
+        }
+    )
+    parts: list[dict[str, Any]] = []
+    r0 = 0
+    for k in cuts:
+        parts.append({**_tracked(pts[r0 : k + 1], math.inf), "path": None, "_run": (r0, k + 1)})
+        parts.append(_gap(pts[k], pts[k + 1]))
+        r0 = k + 1
+    parts.append({**_tracked(pts[r0:], math.inf), "path": None, "_run": (r0, n)})
+    gaps = [p for p in parts if p["kind"] == "gap"]
+    t0, t1 = t_s[0], t_s[-1]
+    return {
+        "track_id": body["id"],
+        "cls": body["cls"],
+        "live": body["live"],
+        "t_start_s": t0,
+        "t_end_s": t1,
+        "duration_s": t1 - t0,
+        "sensors": sorted({s for p in pts for s in p["sensors"]}),
+        "n_points": n,
+        "length_m": sum(p["length_m"] for p in parts if p["kind"] == "tracked"),
+        "n_gaps": len(gaps),
+        "n_handoffs": sum(g["handoff"] for g in gaps),
+        "parts": parts,
+        "event_ids": [],
+    }
+
+
+def _with_paths(
+    skeleton: dict[str, Any], pts: list[dict[str, Any]], t_s: list[float], step_s: float
+) -> dict[str, Any]:
+    parts = []
+    for part in skeleton["parts"]:
+        if part["kind"] == "tracked":
+            r0, r1 = part["_run"]
+            part = {k: v for k, v in part.items() if k != "_run"}
+            part["path"] = _path(pts, t_s, r0, r1, step_s)
+        parts.append(part)
+    return dict(skeleton, parts=parts, event_ids=[])
+
+
+def _in_order(t_s: list[float]) -> bool:
+    return all(a <= b for a, b in zip(t_s, t_s[1:], strict=False))
+
+
+def trajectory(body: dict[str, Any], step_s: float) -> dict[str, Any]:
+    """A (clipped) stored track body split into tracked parts and gaps.
+
+    The same value as :func:`trajectory_reference`: gaps and path points are found by
+    bisection over the (ordered) point times.
+    """
+    t_s = [p["t_s"] for p in body["points"]]
+    if not _in_order(t_s):
+        return trajectory_reference(body, step_s)
+    return _with_paths(_skeleton(body, t_s), body["points"], t_s, step_s)
+
+
+def cached_trajectory(track: CachedTrack, clipped: dict[str, Any], step_s: float) -> dict:
+    """:func:`trajectory` of ``clipped`` (``track``'s body clipped), memoized on ``track``.
+
+    Read-only: the value is shared by the requests that ask for the same window and
+    ``step_s`` of the same stored version (:func:`synopsis` copies what it changes).
+    """
+    if not track.in_order:
+        return trajectory_reference(clipped, step_s)
+    i0 = clipped["first_index"]
+    i1 = i0 + len(clipped["points"])
+    t_s = track.t_s[i0:i1]
+    skeleton = partial(_skeleton, clipped, t_s)
+    skel = track.memoized(("synopsis-skeleton", i0, i1), skeleton)
+    full = partial(_with_paths, skel, clipped["points"], t_s, step_s)
+    return track.memoized(("synopsis", i0, i1, step_s), full)
+
+
 def synopsis(
     bodies: list[dict[str, Any]],
     events: list[dict[str, Any]],
@@ -229,7 +351,18 @@ def synopsis(
     With ``filtered`` (a class or sensor filter was given), only events that involve a
     listed trajectory are kept.
     """
-    trajs = [trajectory(b, step_s) for b in bodies]
+    return assemble([trajectory(b, step_s) for b in bodies], events, t0, t1, filtered)
+
+
+def assemble(
+    trajectories: list[dict[str, Any]],
+    events: list[dict[str, Any]],
+    t0: float | None,
+    t1: float | None,
+    filtered: bool,
+) -> dict[str, Any]:
+    """The synopsis of computed trajectories (shared ones are copied, not changed)."""
+    trajs = [dict(t, event_ids=[]) for t in trajectories]
     by_id = {t["track_id"]: t for t in trajs}
     kept = []
     for e in events:
@@ -281,6 +414,9 @@ def get_synopsis(
     """
     if t0 is not None and t1 is not None and t0 > t1:
         raise HTTPException(422, f"t0 ({t0}) is after t1 ({t1})")
-    bodies = filter_tracks(state, t0, t1, cls, sensor, None)
+    trajs = [
+        cached_trajectory(track, clipped, step_s)
+        for track, clipped in select_tracks(state, t0, t1, cls, sensor, None)
+    ]
     events = state.store.activity(t_from=t0, t_to=t1)
-    return synopsis(bodies, events, t0, t1, step_s, cls is not None or sensor is not None)
+    return assemble(trajs, events, t0, t1, cls is not None or sensor is not None)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import io
 import tempfile
 from datetime import UTC, datetime
+from functools import partial
 from pathlib import Path
 from typing import Any, Literal
 
@@ -28,8 +29,17 @@ from demtrack.core.tracking.types import Track, TrackPoint
 
 from ..models import TracksOut
 from ..state import ConsoleState, StateDep
+from ..track_cache import CachedTrack, TrackCache, clip
 
-__all__ = ["EXPORT_TYPES", "filter_tracks", "parse_bbox", "router", "track_from_body"]
+__all__ = [
+    "EXPORT_TYPES",
+    "filter_tracks",
+    "parse_bbox",
+    "router",
+    "select_tracks",
+    "track_cache",
+    "track_from_body",
+]
 
 #: Export format -> (media type, file suffix).
 EXPORT_TYPES: dict[str, tuple[str, str]] = {
@@ -58,20 +68,42 @@ def parse_bbox(text: str | None) -> tuple[float, float, float, float] | None:
     return box  # type: ignore[return-value]
 
 
-def _clip(track: dict[str, Any], t_from: float | None, t_to: float | None) -> dict[str, Any]:
-    pts = [
-        p
-        for p in track["points"]
-        if (t_from is None or p["t_s"] >= t_from) and (t_to is None or p["t_s"] <= t_to)
-    ]
-    first = track["points"].index(pts[0]) if pts else 0
-    return dict(track, points=pts, first_index=first)
-
-
 def _in_box(track: dict[str, Any], box: tuple[float, float, float, float]) -> bool:
     return any(
         box[0] <= p["e_m"] <= box[2] and box[1] <= p["n_m"] <= box[3] for p in track["points"]
     )
+
+
+def track_cache(state: ConsoleState) -> TrackCache:
+    """The server's :class:`TrackCache` (one per app, over its store)."""
+    cache: TrackCache = state.cached("track_cache", partial(TrackCache, state.store))
+    return cache
+
+
+def select_tracks(
+    state: ConsoleState,
+    t_from: float | None,
+    t_to: float | None,
+    cls: str | None,
+    sensor: str | None,
+    bbox: str | None,
+) -> list[tuple[CachedTrack, dict[str, Any]]]:
+    """Cached tracks passing every filter, each with its body clipped to the window.
+
+    The clipped bodies share their point dicts and lists with the cache: read-only.
+    """
+    if t_from is not None and t_to is not None and t_from > t_to:
+        raise HTTPException(422, f"t_from ({t_from}) is after t_to ({t_to})")
+    box = parse_bbox(bbox)
+    out = []
+    for track in track_cache(state).select(t_from=t_from, t_to=t_to, cls=cls, bbox=box):
+        if sensor is not None and sensor not in track.body["sensors"]:
+            continue
+        clipped = clip(track, t_from, t_to)
+        if not clipped["points"] or (box is not None and not _in_box(clipped, box)):
+            continue
+        out.append((track, clipped))
+    return out
 
 
 def filter_tracks(
@@ -82,19 +114,12 @@ def filter_tracks(
     sensor: str | None,
     bbox: str | None,
 ) -> list[dict[str, Any]]:
-    """Stored track bodies passing every filter, points clipped to the window."""
-    if t_from is not None and t_to is not None and t_from > t_to:
-        raise HTTPException(422, f"t_from ({t_from}) is after t_to ({t_to})")
-    box = parse_bbox(bbox)
-    out = []
-    for body in state.store.tracks(t_from=t_from, t_to=t_to, cls=cls, bbox=box):
-        if sensor is not None and sensor not in body["sensors"]:
-            continue
-        clipped = _clip(body, t_from, t_to)
-        if not clipped["points"] or (box is not None and not _in_box(clipped, box)):
-            continue
-        out.append(clipped)
-    return out
+    """Stored track bodies passing every filter, points clipped to the window.
+
+    Read-only: the bodies share their point dicts and lists with the server's
+    :class:`~demtrack.server.track_cache.TrackCache` (copy before changing anything).
+    """
+    return [clipped for _, clipped in select_tracks(state, t_from, t_to, cls, sensor, bbox)]
 
 
 _T_FROM = Query(None, description="window start (s)", allow_inf_nan=False)

@@ -19,7 +19,13 @@ from demtrack.core.angular_index import (
 )
 from demtrack.core.errors import RaycastError
 from demtrack.core.grid import GridSpec
-from demtrack.core.raycast import HEIGHT_MARGIN_M, MIN_COHERENT_RUN, RayCaster, RayHits
+from demtrack.core.raycast import (
+    BELOW_GROUND,
+    HEIGHT_MARGIN_M,
+    MIN_COHERENT_RUN,
+    RayCaster,
+    RayHits,
+)
 from demtrack.core.raycast_reference import (
     angular_leaves_reference,
     cast_rays_reference,
@@ -246,6 +252,63 @@ def test_coherent_cast_on_a_ridge_field_with_many_crossings():
     assert a.crossed_nodata.any()
 
 
+def test_rays_with_more_hits_than_the_first_pass_keeps_are_rewalked_through_the_index():
+    # Near-level rays along a long corrugated strip cross it dozens of times: more than
+    # the first pass of a coherent batch keeps, so they are re-walked (angular re-walk).
+    x = np.arange(240)
+    elev = 5.0 + 3.0 * np.sin(x / 1.3)[None, :] + 0.3 * np.cos(np.arange(12) / 2.0)[:, None]
+    elev = elev.astype(np.float32)
+    elev[4:7, 40:43] = np.nan
+    dem = FakeDem(GridSpec(0.0, 12.0, 1.0, 12, 240), elev)
+    n = 120
+    az = np.radians(np.linspace(89.0, 91.0, n))
+    el = np.linspace(0.0, -0.02, n)
+    d = np.column_stack([np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el)])
+    o = np.tile([4.6, 6.1, 6.5], (n, 1))
+    caster = RayCaster.from_dem(dem)
+    for max_hits in (256, 11):
+        a = caster.cast(o, d, mode="all", max_hits=max_hits, coherent=True)
+        assert_same(a, caster.cast(o, d, mode="all", max_hits=max_hits, coherent=False))
+        assert_same(a, cast_rays_reference(dem, o, d, mode="all", max_hits=max_hits), tol=1e-6)
+        assert a.counts.max() > 8
+    assert a.truncated.any() and a.crossed_nodata.any()
+
+
+def test_a_run_from_under_the_surface_is_below_ground():
+    # The per-run set-up decides "below ground" once for the origin, as _prepare does per ray.
+    rng = np.random.default_rng(11)
+    dem = random_dem(rng, holes=False, nrows=20, ncols=20)
+    caster = RayCaster.from_dem(dem)
+    o, d = camera_batch(rng, dem, n_cams=1)
+    x, y = o[0, 0], o[0, 1]
+    for dz in (-0.5, 0.5):
+        gx, gy = dem.grid.to_grid(np.array([x]), np.array([y]))
+        z = float(bilinear_sample(dem.elevation, gx, gy)[0])
+        oz = np.tile([x, y, z + dz], (len(o), 1))
+        a = caster.cast(oz, d, coherent=True)
+        assert_same(a, caster.cast(oz, d, coherent=False))
+        assert_same(a, cast_rays_reference(dem, oz, d), tol=1e-6)
+        assert (a.status == BELOW_GROUND).any() == (dz < 0)
+
+
+def test_a_cached_index_missing_bins_casts_exactly_and_is_extended_after():
+    rng = np.random.default_rng(12)
+    dem = random_dem(rng, nrows=25, ncols=25)
+    caster = RayCaster.from_dem(dem)
+    o, d = camera_batch(rng, dem, n_cams=1, n_az=60)
+    third = d.reshape(8, 60, 3)[:, :20].reshape(-1, 3)  # a third of the azimuths
+    part = caster.prepare_origin(o[0], third)
+    want = needed_azimuth_bins(d, dem.grid.cell_m, part.n_az)
+    assert not part.covers(want)
+    for mode in ("first", "all"):
+        a = caster.cast(o, d, mode=mode, coherent=True)
+        assert_same(a, caster.cast(o, d, mode=mode, coherent=False))
+    ix = caster.angular.get(o[0])
+    assert ix is not part and ix.covers(want)
+    for a in np.flatnonzero(part.slot_of_az >= 0):
+        np.testing.assert_array_equal(ix.leaves(a), part.leaves(a))
+
+
 def test_vertical_and_level_rays_share_an_origin():
     rng = np.random.default_rng(7)
     dem = random_dem(rng, nrows=20, ncols=20)
@@ -316,7 +379,7 @@ def test_cone_covers_the_sector():
         mask[(first + np.arange(span)) % n_az] = True
         cone = _cone(mask)
         if span >= 30:
-            assert cone[0] == 0.0  # half a turn or more: scan everything
+            assert cone[0] == 0.0  # part a turn or more: scan everything
             continue
         assert cone[0] == 1.0
         # Directions at the centre of every flagged bin lie inside the cone.
