@@ -249,13 +249,8 @@ def _next_id(c: sqlite3.Connection, sql: str) -> int:
 _REV = "COALESCE((SELECT rev FROM track_rev WHERE track_rev.id = tracks.id), 0)"
 
 
-def _track_where(
-    t_from: float | None,
-    t_to: float | None,
-    cls: str | None,
-    bbox: tuple[float, float, float, float] | None,
-) -> tuple[str, list[float | str]]:
-    """The ``WHERE`` clause and parameters of a track selection (time, class, box overlap)."""
+def _window_where(t_from: float | None, t_to: float | None) -> tuple[list[str], list[float | str]]:
+    """Clauses and parameters selecting rows whose ``[t_start, t_end]`` meets the window."""
     clauses: list[str] = []
     params: list[float | str] = []
     if t_from is not None:
@@ -264,6 +259,17 @@ def _track_where(
     if t_to is not None:
         clauses.append("t_start <= ?")
         params.append(t_to)
+    return clauses, params
+
+
+def _track_where(
+    t_from: float | None,
+    t_to: float | None,
+    cls: str | None,
+    bbox: tuple[float, float, float, float] | None,
+) -> tuple[str, list[float | str]]:
+    """The ``WHERE`` clause and parameters of a track selection (time, class, box overlap)."""
+    clauses, params = _window_where(t_from, t_to)
     if cls is not None:
         clauses.append("cls = ?")
         params.append(cls)
@@ -651,14 +657,7 @@ class Store:
         limit: int = 10_000,
     ) -> list[dict[str, Any]]:
         """Activity event bodies overlapping ``[t_from, t_to]``, of the kinds, by start time."""
-        clauses: list[str] = []
-        params: list[float | str] = []
-        if t_from is not None:
-            clauses.append("t_end >= ?")
-            params.append(t_from)
-        if t_to is not None:
-            clauses.append("t_start <= ?")
-            params.append(t_to)
+        clauses, params = _window_where(t_from, t_to)
         if kinds:
             clauses.append(f"kind IN ({','.join('?' * len(kinds))})")
             params += list(kinds)

@@ -192,22 +192,10 @@ def _gap(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def trajectory_reference(body: dict[str, Any], step_s: float) -> dict[str, Any]:
-    """A (clipped) stored track body split into tracked parts and gaps (plain twin).
-
-    Pair by pair and point by point: :func:`trajectory`'s reference in the tests, and
-    what it falls back to when the points are not in time order.
-    """
-    pts = body["points"]
-    parts: list[dict[str, Any]] = []
-    run = [pts[0]]
-    for a, b in zip(pts, pts[1:], strict=False):
-        if _in_gap(a["t_s"], b["t_s"], body["gaps"]):
-            parts.append(_tracked(run, step_s))
-            parts.append(_gap(a, b))
-            run = []
-        run.append(b)
-    parts.append(_tracked(run, step_s))
+def _summary(
+    body: dict[str, Any], pts: list[dict[str, Any]], parts: list[dict[str, Any]]
+) -> dict[str, Any]:
+    """A trajectory of ``body`` (clipped to ``pts``, time-ordered) made of ``parts``."""
     gaps = [p for p in parts if p["kind"] == "gap"]
     t0, t1 = pts[0]["t_s"], pts[-1]["t_s"]
     return {
@@ -225,6 +213,25 @@ def trajectory_reference(body: dict[str, Any], step_s: float) -> dict[str, Any]:
         "parts": parts,
         "event_ids": [],
     }
+
+
+def trajectory_reference(body: dict[str, Any], step_s: float) -> dict[str, Any]:
+    """A (clipped) stored track body split into tracked parts and gaps (plain twin).
+
+    Pair by pair and point by point: :func:`trajectory`'s reference in the tests, and
+    what it falls back to when the points are not in time order.
+    """
+    pts = body["points"]
+    parts: list[dict[str, Any]] = []
+    run = [pts[0]]
+    for a, b in zip(pts, pts[1:], strict=False):
+        if _in_gap(a["t_s"], b["t_s"], body["gaps"]):
+            parts.append(_tracked(run, step_s))
+            parts.append(_gap(a, b))
+            run = []
+        run.append(b)
+    parts.append(_tracked(run, step_s))
+    return _summary(body, pts, parts)
 
 
 def _since(t0: float, t: float) -> float:
@@ -273,23 +280,7 @@ def _skeleton(body: dict[str, Any], t_s: list[float]) -> dict[str, Any]:
         parts.append(_gap(pts[k], pts[k + 1]))
         r0 = k + 1
     parts.append({**_tracked(pts[r0:], math.inf), "path": None, "_run": (r0, n)})
-    gaps = [p for p in parts if p["kind"] == "gap"]
-    t0, t1 = t_s[0], t_s[-1]
-    return {
-        "track_id": body["id"],
-        "cls": body["cls"],
-        "live": body["live"],
-        "t_start_s": t0,
-        "t_end_s": t1,
-        "duration_s": t1 - t0,
-        "sensors": sorted({s for p in pts for s in p["sensors"]}),
-        "n_points": n,
-        "length_m": sum(p["length_m"] for p in parts if p["kind"] == "tracked"),
-        "n_gaps": len(gaps),
-        "n_handoffs": sum(g["handoff"] for g in gaps),
-        "parts": parts,
-        "event_ids": [],
-    }
+    return _summary(body, pts, parts)
 
 
 def _with_paths(
