@@ -1,7 +1,9 @@
 """The terrain surface: bilinear interpolation of cell-centre values.
 
 One function, shared by :meth:`Dem.sample`, hole filling and the reference ray caster, so
-the surface that is sampled is exactly the surface that rays hit.
+the surface that is sampled is exactly the surface that rays hit. It runs a numba loop
+(``core.surface_kernels``); :func:`bilinear_sample_reference` is its numpy twin, the same
+arithmetic in the same order, so the two agree bit for bit.
 """
 
 from __future__ import annotations
@@ -9,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ["bilinear_sample"]
+__all__ = ["bilinear_sample", "bilinear_sample_reference"]
 
 
 def bilinear_sample(values: np.ndarray, gx: ArrayLike, gy: ArrayLike) -> np.ndarray:
@@ -28,6 +30,23 @@ def bilinear_sample(values: np.ndarray, gx: ArrayLike, gy: ArrayLike) -> np.ndar
         NaN outside ``[0, ncols-1] x [0, nrows-1]`` or where any of the four
         surrounding centres is NaN.
     """
+    from .surface_kernels import bilinear_kernel  # numba loads on first use
+
+    values = np.asarray(values)
+    gx, gy = np.broadcast_arrays(np.asarray(gx, dtype=np.float64), np.asarray(gy, dtype=np.float64))
+    out = np.empty(gx.shape)
+    if out.size:
+        bilinear_kernel(
+            values,
+            np.ascontiguousarray(gx).reshape(-1),
+            np.ascontiguousarray(gy).reshape(-1),
+            out.reshape(-1),
+        )
+    return out
+
+
+def bilinear_sample_reference(values: np.ndarray, gx: ArrayLike, gy: ArrayLike) -> np.ndarray:
+    """Numpy twin of :func:`bilinear_sample` (its kernel's oracle): same parameters, same bits."""
     gx, gy = np.broadcast_arrays(np.asarray(gx, dtype=np.float64), np.asarray(gy, dtype=np.float64))
     nrows, ncols = values.shape
     out = np.full(gx.shape, np.nan)

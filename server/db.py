@@ -22,6 +22,11 @@ Tables
                     updated while it lasts (migration 2)
 ``track_rev``       a version per track, renewed by triggers whenever its row is written
                     (migration 3), so readers can cache decoded bodies by version
+``track_points``    each track's points, one JSON text per row, ``k`` = index (migration
+                    4); ``tracks.body`` holds the rest of the body. A live track's batch
+                    rewrites only its points from the first that changed (new points and
+                    the smoother's revised tail), not its whole history; readers get
+                    the whole body back (:func:`track_body_text`), the same text as before.
 """
 
 from __future__ import annotations
@@ -46,6 +51,7 @@ __all__ = [
     "dumps_json",
     "loads_json",
     "migrate",
+    "track_body_text",
 ]
 
 
@@ -147,11 +153,30 @@ def _m3_track_rev(conn: sqlite3.Connection) -> None:
     )
 
 
+def _m4_track_points(conn: sqlite3.Connection) -> None:
+    # Points in rows of their own: a live track's body grew with its history and was
+    # written whole on every batch (about 13 kB of JSON per detection in a 20-track
+    # replay). Existing bodies are split: their points move here, the rest stays.
+    conn.execute(
+        "CREATE TABLE track_points (track_id INTEGER NOT NULL, k INTEGER NOT NULL,"
+        " point TEXT NOT NULL, PRIMARY KEY (track_id, k)) WITHOUT ROWID"
+    )
+    conn.execute(
+        "INSERT INTO track_points (track_id, k, point)"
+        " SELECT tracks.id, p.key, p.value FROM tracks, json_each(tracks.body, '$.points') AS p"
+    )
+    conn.execute(
+        "UPDATE tracks SET body = json_remove(body, '$.points')"
+        " WHERE json_type(body, '$.points') IS NOT NULL"
+    )
+
+
 #: Ordered migrations; applying ``MIGRATIONS[k]`` takes the schema from version k to k + 1.
 MIGRATIONS: tuple[Callable[[sqlite3.Connection], None], ...] = (
     _m1_initial,
     _m2_activity,
     _m3_track_rev,
+    _m4_track_points,
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 
@@ -247,6 +272,47 @@ def _next_id(c: sqlite3.Connection, sql: str) -> int:
 
 #: A track row's version (see migration 3); 0 for a row written before it.
 _REV = "COALESCE((SELECT rev FROM track_rev WHERE track_rev.id = tracks.id), 0)"
+
+
+def track_body_text(head: str, points: Sequence[str]) -> str:
+    """A track's whole body as JSON: its stored head with ``points`` as the last key.
+
+    The same text as encoding the whole body at once when ``points`` was its last key
+    (as in every body the server writes).
+    """
+    sep = "," if head != "{}" else ""
+    return f'{head[:-1]}{sep}"points":[{",".join(points)}]}}'
+
+
+def _split_track_body(row: Mapping[str, Any]) -> tuple[str, list[str], int]:
+    """A track row's head text, point texts and the index its points start at.
+
+    Rows either give the split form (``points_from`` and ``point_texts``: points from
+    that index on, ``body`` without points) or a whole ``body`` (dict or JSON text).
+    """
+    body = row["body"]
+    if "points_from" in row:
+        head = body if isinstance(body, str) else dumps_json(body)
+        return head, list(row["point_texts"]), int(row["points_from"])
+    if isinstance(body, str):
+        body = loads_json(body)
+    head = dumps_json({k: v for k, v in body.items() if k != "points"})
+    return head, [dumps_json(p) for p in body.get("points", ())], 0
+
+
+def _points_of(c: sqlite3.Connection, ids: Sequence[int]) -> dict[int, list[str]]:
+    """The stored point texts of tracks ``ids``, in order (an empty list for none)."""
+    out: dict[int, list[str]] = {i: [] for i in ids}
+    for k in range(0, len(ids), 500):
+        chunk = list(ids[k : k + 500])
+        marks = ",".join("?" * len(chunk))
+        for tid, point in c.execute(
+            f"SELECT track_id, point FROM track_points WHERE track_id IN ({marks})"  # noqa: S608
+            " ORDER BY track_id, k",
+            chunk,
+        ):
+            out[tid].append(point)
+    return out
 
 
 def _window_where(t_from: float | None, t_to: float | None) -> tuple[list[str], list[float | str]]:
@@ -406,7 +472,10 @@ class Store:
         fixes : iterable of (detection_id, t_s, sensor, cls, status, body)
         tracks : iterable of dict
             Track rows: ``id, cls, t_start, t_end, e_min, n_min, e_max, n_max, sensors
-            (list), live (bool), body (dict, or its JSON text)``.
+            (list), live (bool), body (dict, or its JSON text)``. Or, to rewrite only
+            the points from one index on: ``body`` without ``points`` (its last key in
+            the whole body) and ``points_from`` (int), ``point_texts`` (the JSON texts of
+            the points from that index on; stored points beyond them are dropped).
         events : iterable of (type, payload)
             Payloads without ``seq``; each gets the next sequence number.
         replace_tracks : bool
@@ -436,12 +505,14 @@ class Store:
                 if keep:
                     gone = [(i,) for (i,) in c.execute("SELECT id FROM tracks") if i not in keep]
                     c.executemany("DELETE FROM tracks WHERE id = ?", gone)
+                    c.executemany("DELETE FROM track_points WHERE track_id = ?", gone)
                 else:
                     c.execute("DELETE FROM tracks")
-            c.executemany(
-                "INSERT OR REPLACE INTO tracks (id, cls, t_start, t_end, e_min, n_min, e_max,"
-                " n_max, sensors, live, body) VALUES (?,?,?,?,?,?,?,?,?,?,?)",
-                [
+                    c.execute("DELETE FROM track_points")
+            heads, cuts, points = [], [], []
+            for r in tracks:
+                head, texts, start = _split_track_body(r)
+                heads.append(
                     (
                         r["id"],
                         r["cls"],
@@ -453,11 +524,19 @@ class Store:
                         r["n_max"],
                         dumps_json(r["sensors"]),
                         int(r["live"]),
-                        r["body"] if isinstance(r["body"], str) else dumps_json(r["body"]),
+                        head,
                     )
-                    for r in tracks
-                ],
+                )
+                cuts.append((r["id"], start))
+                points += [(r["id"], start + k, t) for k, t in enumerate(texts)]
+            c.executemany(
+                "INSERT OR REPLACE INTO tracks (id, cls, t_start, t_end, e_min, n_min, e_max,"
+                " n_max, sensors, live, body) VALUES (?,?,?,?,?,?,?,?,?,?,?)",
+                heads,
             )
+            # Points from the first that changed on: dropped, then written again.
+            c.executemany("DELETE FROM track_points WHERE track_id = ? AND k >= ?", cuts)
+            c.executemany("INSERT INTO track_points (track_id, k, point) VALUES (?,?,?)", points)
             for body in activity:
                 row = c.execute("SELECT id FROM activity WHERE key = ?", (body["key"],)).fetchone()
                 if row is None:
@@ -600,8 +679,17 @@ class Store:
         caller clips the points.
         """
         where, params = _track_where(t_from, t_to, cls, bbox)
-        rows = self._rows(f"SELECT body FROM tracks{where} ORDER BY id", params)  # noqa: S608
-        return [loads_json(r[0]) for r in rows]
+        with self._rlock:
+            self._r.execute("BEGIN")  # heads and points from one snapshot
+            try:
+                rows = self._r.execute(
+                    f"SELECT id, body FROM tracks{where} ORDER BY id",  # noqa: S608
+                    params,
+                ).fetchall()
+                points = _points_of(self._r, [i for i, _ in rows])
+            finally:
+                self._r.execute("COMMIT")
+        return [loads_json(track_body_text(head, points[i])) for i, head in rows]
 
     def track_rows(
         self,
@@ -628,6 +716,7 @@ class Store:
                 ).fetchall()
                 todo = [i for i, rev in heads if known.get(i) != rev]
                 texts: dict[int, tuple[int, str]] = {}
+                points = _points_of(self._r, todo)
                 for k in range(0, len(todo), 500):
                     chunk = todo[k : k + 500]
                     marks = ",".join("?" * len(chunk))
@@ -635,7 +724,7 @@ class Store:
                         f"SELECT id, {_REV}, body FROM tracks WHERE id IN ({marks})",  # noqa: S608
                         chunk,
                     ):
-                        texts[i] = (rev, body)
+                        texts[i] = (rev, track_body_text(body, points[i]))
             finally:
                 self._r.execute("COMMIT")
         return [(i, *texts[i]) if i in texts else (i, rev, None) for i, rev in heads]
@@ -644,8 +733,16 @@ class Store:
         """The body of track ``track_id`` (None if there is none), by its primary key."""
         if not -(2**63) <= int(track_id) < 2**63:  # beyond SQLite's integers: no such track
             return None
-        rows = self._rows("SELECT body FROM tracks WHERE id = ?", (int(track_id),))
-        return loads_json(rows[0][0]) if rows else None
+        with self._rlock:
+            self._r.execute("BEGIN")
+            try:
+                rows = self._r.execute(
+                    "SELECT body FROM tracks WHERE id = ?", (int(track_id),)
+                ).fetchall()
+                points = _points_of(self._r, [int(track_id)]) if rows else {}
+            finally:
+                self._r.execute("COMMIT")
+        return loads_json(track_body_text(rows[0][0], points[int(track_id)])) if rows else None
 
     def activity(
         self,

@@ -325,6 +325,9 @@ class Pipeline:
         # Per track: positions as last sent, their JSON point dicts and those dicts encoded
         # (a changed track's stored body is re-assembled from the encoded points).
         self._points: dict[int, tuple[np.ndarray, list[dict[str, Any]], list[str]]] = {}
+        # Per track: the first point index whose encoding changed since its row was last
+        # stored (the store rewrites points from there on); cleared once a write commits.
+        self._dirty_from: dict[int, int] = {}
         self._heap: list[tuple[float, str, int, dict[str, Any]]] = []
         #: Tracker fixes of the queued bodies made in this run (detection id -> fix):
         #: what :func:`fix_from_body` would make of the body, without the round trip.
@@ -369,6 +372,7 @@ class Pipeline:
             # Tracks the replay forgot (ended long ago) keep their stored rows.
             rows, _ = self._track_changes(self.tracker.tracks(), force=True)
             self.store.write_derived([], rows, [], replace_tracks=True, keep_track_ids=dropped)
+            self._dirty_from.clear()
             if self.event_params is not None:
                 known = self.store.activity(open_only=True) + self.store.latest_activity("handoff")
                 self.live_events = LiveEvents(self.site, self.event_params, known)
@@ -535,6 +539,7 @@ class Pipeline:
         for i in ids:
             self._seen.pop(i, None)
             self._points.pop(i, None)
+            self._dirty_from.pop(i, None)
         return ids
 
     @property
@@ -613,6 +618,8 @@ class Pipeline:
             )
             events.append(("event", {"type": "event", "kind": "ingest", "t_s": t, "text": text}))
         seqs = self.store.write_derived(rows, track_rows, events, activity=activity)
+        for r in track_rows:  # stored: their points are clean
+            self._dirty_from.pop(r["id"], None)
         self.publish([{**p, "seq": s} for (_, p), s in zip(events, seqs, strict=True)])
         self._drop_ended()  # after their final rows are stored
 
@@ -712,6 +719,7 @@ class Pipeline:
             else:
                 pts, js = [], []
             todo.append((track, same, pts, js))
+            self._dirty_from[track.id] = min(same, self._dirty_from.get(track.id, same))
         if not todo:
             return
         q = np.concatenate([t.p_enu[same:] for t, same, _, _ in todo])
@@ -745,16 +753,6 @@ class Pipeline:
         """JSON points of a track; geodetic conversion only for points that changed."""
         self._refresh_points([track])
         return self._points[track.id][1]
-
-    def _body_json(self, body: dict[str, Any]) -> str:
-        """``body`` (a whole :meth:`track_body`) as JSON, from its points' cached encodings.
-
-        The same text as encoding ``body`` at once (``points`` is its last key), without
-        re-encoding a long track's unchanged points on every batch.
-        """
-        head = dumps_json({k: v for k, v in body.items() if k != "points"})
-        js = self._points[body["id"]][2]
-        return f'{head[:-1]},"points":[{",".join(js)}]}}'
 
     def track_body(self, track: Track, live: bool, first_index: int = 0) -> dict[str, Any]:
         """JSON body of a track, points from ``first_index`` on."""
@@ -797,6 +795,7 @@ class Pipeline:
         self._refresh_points([t for t, _, _, _ in changed])
         for track, live, p, prev in changed:
             full = self.track_body(track, live)
+            start = 0 if force else self._dirty_from.get(track.id, len(track.points))
             rows.append(
                 {
                     "id": track.id,
@@ -809,7 +808,9 @@ class Pipeline:
                     "n_max": float(p[:, 1].max()),
                     "sensors": sorted(track.sensors),
                     "live": live,
-                    "body": self._body_json(full),
+                    "body": dumps_json({k: v for k, v in full.items() if k != "points"}),
+                    "points_from": start,
+                    "point_texts": self._points[track.id][2][start:],
                 }
             )
             if not live:

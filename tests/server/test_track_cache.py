@@ -198,7 +198,8 @@ def test_an_old_database_migrates_and_every_write_moves_rev(tmp_path):
         assert store.schema_version() == len(db.MIGRATIONS) >= 3
         cache = TrackCache(store)
         assert [t.body for t in cache.select()] == store.tracks() == [_body(1, 3, live=False)]
-        assert store.track_rows({})[0][:2] == (1, 0)
+        # migration 4 moved its points out of the row: that write gave it a version
+        assert store.track_rows({})[0][:2] == (1, 1)
         store.write_derived([], [_row(2, _body(2, 4))], [])
         assert [t.body for t in cache.select()] == store.tracks()
         # Same length, same end, same point count: only the version tells them apart.
