@@ -8,13 +8,11 @@ replay and the numba warm-up happen in the lifespan, when the server starts.
 from __future__ import annotations
 
 import asyncio
-import contextlib
-import gc
 import json
 import logging
 import threading
 import time
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Any
 
@@ -164,27 +162,6 @@ def _start_replay(site_: Site, store: Store, pipeline: Pipeline, settings: Setti
     return replay.start()
 
 
-#: Python's cyclic garbage collector while the server runs: a young-generation threshold of
-#: 50,000 allocations instead of 700, and the objects alive after start-up (site model,
-#: libraries, the replayed tracker) frozen out of full collections. A live replay
-#: allocates many short-lived dicts and arrays; with the defaults the collector took about
-#: 2.7 s of CPU per 20,000 detections (12 % of the ingest path), with these 0.5 s.
-_GC_THRESHOLD = (50_000, 20, 100)
-
-
-@contextlib.contextmanager
-def _server_gc() -> Iterator[None]:
-    """Tune the garbage collector for serving; restore it on shutdown."""
-    before = gc.get_threshold()
-    gc.freeze()
-    gc.set_threshold(*_GC_THRESHOLD)
-    try:
-        yield
-    finally:
-        gc.set_threshold(*before)
-        gc.unfreeze()
-
-
 @asynccontextmanager
 async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     settings: Settings = app.state.settings
@@ -218,8 +195,7 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     app.state.console = ConsoleState(settings, site_, store, hub, pipeline, caster)
     app.state.replay = _start_replay(site_, store, pipeline, settings) if settings.replay else None
     try:
-        with _server_gc():
-            yield
+        yield
     finally:
         if app.state.replay is not None:  # before the store closes: it ingests
             await run_in_threadpool(app.state.replay.stop)
