@@ -46,6 +46,9 @@ class GlobalNearestNeighbour:
         if n_tracks == 0:
             return []
         m = n_measurements
+        quick = _obvious(hypotheses, self.miss_cost)
+        if quick is not None:
+            return quick
         cost = np.full((n_tracks + m, m + n_tracks), _FORBIDDEN)
         for i, row in enumerate(hypotheses):
             for j, hyp in enumerate(row):
@@ -62,3 +65,38 @@ class GlobalNearestNeighbour:
                 if hyp is not None:
                     out[r] = hyp
         return out
+
+
+def _obvious(
+    hypotheses: Sequence[Sequence[SingleHypothesis | None]], miss_cost: float
+) -> list[Hypothesis] | None:
+    """The assignment when it needs no solver (None when it does).
+
+    When no two tracks gate the same measurement the tracks do not compete, and the
+    optimum is each track's own: its cheapest hypothesis where that is strictly cheaper
+    than missing and than its others, else the missed detection. A tie (or a shared
+    measurement) goes to the solver, which settles it its own way.
+    """
+    seen: set[int] = set()
+    out: list[Hypothesis] = []
+    for row in hypotheses:
+        real = []
+        for j, h in enumerate(row):
+            if h is not None:
+                if j in seen:
+                    return None
+                seen.add(j)
+                real.append(h)
+        if not real:
+            out.append(MissedDetection())
+            continue
+        best = min(real, key=_distance2)
+        d = best.distance2
+        if d == miss_cost or sum(1 for h in real if h.distance2 <= d) != 1:
+            return None
+        out.append(best if d < miss_cost else MissedDetection())
+    return out
+
+
+def _distance2(h: SingleHypothesis) -> float:
+    return h.distance2

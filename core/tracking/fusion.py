@@ -26,7 +26,7 @@ from scipy.optimize import linear_sum_assignment
 from .config import TrackerConfig
 from .fusion_kernels import screen_pairs_kernel, triangulation_cov_kernel
 from .protocols import Measurement
-from .types import Fix
+from .types import CLASSES, Fix
 
 __all__ = [
     "RayApproach",
@@ -310,15 +310,30 @@ def fuse_measurements(
     names = sorted(by_sensor)
     used: set[int] = set()
     fused: list[Measurement] = []
+    if len(names) < 2:
+        return list(measurements)
+    # each sensor's arrays made once (a sensor takes part in several sensor pairs)
+    arrays: dict[str, _Arrays] = {}
+
+    def rows_of(name: str) -> tuple[list[int], _Arrays]:
+        every = by_sensor[name]
+        if name not in arrays:
+            arrays[name] = _fix_arrays([measurements[i].fix for i in every])
+        keep = [k for k, i in enumerate(every) if i not in used]
+        if len(keep) == len(every):
+            return every, arrays[name]
+        rows = np.array(keep, dtype=np.intp)
+        return [every[k] for k in keep], tuple(a[rows] for a in arrays[name])
+
     for ia, sa in enumerate(names):
         for sb in names[ia + 1 :]:
-            left = [i for i in by_sensor[sa] if i not in used]
-            right = [j for j in by_sensor[sb] if j not in used]
+            left, pre_a = rows_of(sa)
+            right, pre_b = rows_of(sb)
             if not left or not right:
                 continue
             fa = [measurements[i].fix for i in left]
             fb = [measurements[j].fix for j in right]
-            for r, c, tri in _pair_vectorised(fa, fb, config):
+            for r, c, tri in _pair_vectorised(fa, fb, config, (pre_a, pre_b)):
                 i, j = left[r], right[c]
                 used.update((i, j))
                 mi, mj = measurements[i], measurements[j]
@@ -358,11 +373,17 @@ def _pair_scalar(
 
 
 def _pair_vectorised(
-    fa: Sequence[Fix], fb: Sequence[Fix], config: TrackerConfig
+    fa: Sequence[Fix],
+    fb: Sequence[Fix],
+    config: TrackerConfig,
+    pre: tuple[_Arrays, _Arrays] | None = None,
 ) -> list[tuple[int, int, tuple[Fix, float]]]:
-    """:func:`_pair_scalar` with the checks and the matched triangulations vectorised."""
+    """:func:`_pair_scalar` with the checks and the matched triangulations vectorised.
+
+    ``pre``: :func:`_fix_arrays` of ``fa`` and of ``fb``, when the caller has them.
+    """
     out: list[tuple[int, int, tuple[Fix, float]]] = []
-    screen = _screen_pairs(fa, fb, config)
+    screen = _screen_pairs(fa, fb, config, pre)
     ok = np.isfinite(screen.cost)
     if not ok.any():
         return out
@@ -390,8 +411,33 @@ def _pair_vectorised(
 _SCREEN_TOL = 1e-6
 
 
+#: A sequence of fixes' arrays for :func:`_screen_pairs` (see :func:`_fix_arrays`).
+_Arrays = tuple[np.ndarray, ...]
+
+
+def _fix_arrays(fixes: Sequence[Fix]) -> _Arrays:
+    """Origins (n, 3), directions (n, 3), times (n,), class codes (n,) and padded hits.
+
+    The codes number the classes in name order (only equality matters); the hits are
+    :func:`_padded_hits`, whose NaN padding the kernels skip, so rows taken from a wider
+    padding give the same answers.
+    """
+    origin = np.array([f.origin_enu for f in fixes])
+    direction = np.array([f.direction_enu for f in fixes])
+    t_s = np.array([f.t_s for f in fixes])
+    code = np.array([CLASSES.index(f.cls) for f in fixes], dtype=np.int64)
+    return (origin, direction, t_s, code, *_padded_hits(fixes))
+
+
 def _padded_hits(fixes: Sequence[Fix]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Hits (n, k, 2), their sigmas (n, k) and covariances (n, k, 2, 2), NaN-padded."""
+    counts = {f.n_hits for f in fixes}
+    if len(counts) == 1 and 0 not in counts and all(f.hit_cov_en_m2 is not None for f in fixes):
+        # every fix with the same number of hits, none padded: stack them whole
+        xy = np.array([f.hits_enu for f in fixes])[:, :, :2].copy()
+        sig = np.array([f.hit_sigma_m for f in fixes])
+        cov = np.array([f.hit_cov_en_m2 for f in fixes])
+        return xy, sig, cov
     k = max((f.n_hits for f in fixes), default=0)
     xy = np.full((len(fixes), max(k, 1), 2), np.nan)
     sig = np.full((len(fixes), max(k, 1)), np.nan)
@@ -424,23 +470,21 @@ class _Screen:
     hits_b: tuple[np.ndarray, np.ndarray]
 
 
-def _screen_pairs(fa: Sequence[Fix], fb: Sequence[Fix], config: TrackerConfig) -> _Screen:
+def _screen_pairs(
+    fa: Sequence[Fix],
+    fb: Sequence[Fix],
+    config: TrackerConfig,
+    pre: tuple[_Arrays, _Arrays] | None = None,
+) -> _Screen:
     """The triangulation checks of every (a, b) pair, vectorised (see :class:`_Screen`).
 
     Arrays are ``(len(fa), len(fb))``. The checks of :func:`_triangulate`; a pair within
     :data:`_SCREEN_TOL` of any threshold is decided by :func:`_triangulate` itself.
+    ``pre``: :func:`_fix_arrays` of ``fa`` and of ``fb``, when the caller has them.
     """
-    oa = np.array([f.origin_enu for f in fa])
-    da = np.array([f.direction_enu for f in fa])
-    ob = np.array([f.origin_enu for f in fb])
-    db = np.array([f.direction_enu for f in fb])
-    ta = np.array([f.t_s for f in fa])
-    tb = np.array([f.t_s for f in fb])
-    codes = {c: k for k, c in enumerate(sorted({f.cls for f in (*fa, *fb)}))}
-    ca = np.array([codes[f.cls] for f in fa], dtype=np.int64)
-    cb = np.array([codes[f.cls] for f in fb], dtype=np.int64)
-    hxa, sga, cva = _padded_hits(fa)
-    hxb, sgb, cvb = _padded_hits(fb)
+    arrays_a, arrays_b = (_fix_arrays(fa), _fix_arrays(fb)) if pre is None else pre
+    oa, da, ta, ca, hxa, sga, cva = arrays_a
+    ob, db, tb, cb, hxb, sgb, cvb = arrays_b
     min_sin = math.sin(math.radians(config.fusion_min_angle_deg))
     same, worst, d2, p, miss, s, t, sin_angle = screen_pairs_kernel(
         oa, da, ta, ca, hxa, sga, cva, ob, db, tb, cb, hxb, sgb, cvb,
@@ -481,13 +525,23 @@ def _triangulate_screened(
         screen.range_b[rows, cols], ga, gb, hxa[rows], cva[rows], hxb[cols], cvb[cols],
         float(config.ray_sigma_rad),
     )  # fmt: skip
+    # the fixes' hit, road point and sigma: rows of read-only copies made once
+    p_ro, sigma_ro = p.copy(), sigma.copy()
+    for arr in (p_ro, sigma_ro, cov):
+        arr.setflags(write=False)
     out = []
+    p_l, sigma_l, cov_l = p.tolist(), sigma.tolist(), cov.reshape(-1, 4).tolist()
     for k, (r, c) in enumerate(zip(rows.tolist(), cols.tolist(), strict=True)):
         a, b = fa[r], fb[c]
-        road = p[k] if (a.road_hit_enu is not None or b.road_hit_enu is not None) else None
         scores = [v for v in (a.score, b.score) if v is not None]
+        t_s = 0.5 * (a.t_s + b.t_s)
+        if _plain(t_s, p_l[k], sigma_l[k], cov_l[k]):
+            fix = _trusted_fused_fix(a, b, t_s, p_ro, sigma_ro, cov, k, scores)
+            out.append((fix, float(miss[k])))
+            continue
+        road = p[k] if (a.road_hit_enu is not None or b.road_hit_enu is not None) else None
         fix = _fused_fix(
-            0.5 * (a.t_s + b.t_s),
+            t_s,
             "+".join(sorted((a.sensor, b.sensor))),
             a.cls,
             a.detection_index,
@@ -501,3 +555,58 @@ def _triangulate_screened(
         )
         out.append((fix, float(miss[k])))
     return out
+
+
+def _plain(t_s: float, p: list[float], sigma: float, cov: list[float]) -> bool:
+    """Whether :func:`_fused_fix` would trust these values (finite, sigma > 0, SPD cov).
+
+    ``cov`` flattened ``[c00, c01, c10, c11]``. A sum is finite only if every term is;
+    one that overflows says False, and the checking constructor then decides.
+    """
+    c00, c01, c10, c11 = cov
+    return (
+        math.isfinite(t_s + p[0] + p[1] + p[2] + sigma + c00 + c01 + c10 + c11)
+        and sigma > 0
+        and c01 == c10
+        and c00 > 0
+        and c00 * c11 - c01 * c10 > 0
+    )
+
+
+def _trusted_fused_fix(
+    a: Fix,
+    b: Fix,
+    t_s: float,
+    p: np.ndarray,
+    sigma: np.ndarray,
+    cov: np.ndarray,
+    k: int,
+    scores: list[float],
+) -> Fix:
+    """:func:`_fused_fix` of row ``k`` of a screened pair, its checks passed already.
+
+    The same values it makes when they pass (a copy of the direction renormalised; the
+    hit, road point, sigma and covariance: row ``k`` of the read-only ``p``, ``sigma``
+    and ``cov``), without the per-fix checks.
+    """
+    unit = np.array(a.direction_enu, dtype=np.float64)
+    unit /= math.sqrt(float(unit.dot(unit)))  # np.linalg.norm's own formula
+    unit.setflags(write=False)
+    hits = p[k : k + 1]
+    road = p[k] if (a.road_hit_enu is not None or b.road_hit_enu is not None) else None
+    sig = sigma[k : k + 1]
+    cov_k = cov[k : k + 1]
+    sensor = a.sensor + "+" + b.sensor if a.sensor <= b.sensor else b.sensor + "+" + a.sensor
+    return Fix._trusted(
+        t_s,
+        sensor,
+        a.cls,
+        a.detection_index,
+        a.origin_enu,
+        unit,
+        hits,
+        sig,
+        road,
+        max(scores) if scores else None,
+        cov_k,
+    )

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import TrackingError
+from .hypothesiser_kernels import gate_kernel
 from .protocols import Candidates, SingleHypothesis
 
 __all__ = ["CandidateBlock", "GatedNearestHit", "gate_d2", "mahalanobis2"]
@@ -61,11 +62,14 @@ class CandidateBlock:
         sizes = [c.size for c in cands]
         total = sum(sizes)
         width = max(sizes, default=1)
-        slots = np.full((len(cands), width), total, dtype=np.intp)
-        start = 0
-        for j, m in enumerate(sizes):
-            slots[j, :m] = np.arange(start, start + m)
-            start += m
+        if width == 1 and total == len(cands):  # one candidate each, the usual case
+            slots = np.arange(total, dtype=np.intp).reshape(total, 1)
+        else:
+            slots = np.full((len(cands), width), total, dtype=np.intp)
+            start = 0
+            for j, m in enumerate(sizes):
+                slots[j, :m] = np.arange(start, start + m)
+                start += m
         if not cands:
             return cls(np.zeros((0, 2)), np.zeros((0, 2, 2)), slots)
         z = np.concatenate([c.z_enu[:, :2] for c in cands])
@@ -76,6 +80,19 @@ class CandidateBlock:
     def n_measurements(self) -> int:
         """Number of stacked measurements ``n``."""
         return int(self.slots.shape[0])
+
+
+#: The dtypes :func:`~.hypothesiser_kernels.gate_kernel` is called with.
+_TYPES = (np.float64, np.float64, np.float64, np.float64, np.intp, np.bool_)
+
+
+def _hypothesis(measurement_index: int, candidate_index: int, distance2: float) -> SingleHypothesis:
+    """``SingleHypothesis(...)`` without the frozen dataclass's per-field cost."""
+    hyp = object.__new__(SingleHypothesis)
+    hyp.__dict__.update(
+        measurement_index=measurement_index, candidate_index=candidate_index, distance2=distance2
+    )
+    return hyp
 
 
 def mahalanobis2(s: np.ndarray, nu: np.ndarray) -> np.ndarray:
@@ -150,15 +167,19 @@ class GatedNearestHit:
         """
         n_tracks, n = allowed.shape
         out: list[list[SingleHypothesis | None]] = [[None] * n for _ in range(n_tracks)]
-        if n_tracks == 0 or not np.any(allowed):
+        if n_tracks == 0 or not allowed.any():
             return out
-        s = covs_xy[:, None, :, :] + block.cov[None, :, :, :]
-        nu = block.z_xy[None, :, :] - means_xy[:, None, :]
-        d2 = mahalanobis2(s, nu)
-        d2 = np.concatenate([d2, np.full((n_tracks, 1), np.inf)], axis=1)[:, block.slots]
-        best = np.argmin(d2, axis=2)
-        d2_best = np.take_along_axis(d2, best[..., None], axis=2)[..., 0]
-        hit = allowed & (d2_best <= self.gate_d2)
-        for i, j in zip(*np.nonzero(hit), strict=True):
-            out[i][j] = SingleHypothesis(int(j), int(best[i, j]), float(d2_best[i, j]))
+        # one compiled pass (gate_kernel: the numpy form's operations, the same bits)
+        args = [means_xy, covs_xy, block.z_xy, block.cov, block.slots, allowed]
+        if not all(
+            a.flags.c_contiguous and a.dtype == t for a, t in zip(args, _TYPES, strict=True)
+        ):
+            args = [np.ascontiguousarray(a, dtype=t) for a, t in zip(args, _TYPES, strict=True)]
+        best, d2_best = gate_kernel(*args)
+        gate = self.gate_d2
+        for i, (b_row, d_row) in enumerate(zip(best.tolist(), d2_best.tolist(), strict=True)):
+            row = out[i]
+            for j, d in enumerate(d_row):
+                if d <= gate and b_row[j] >= 0:  # not allowed: -1
+                    row[j] = _hypothesis(j, b_row[j], d)
         return out

@@ -59,6 +59,24 @@ class GaussianState:
     gains: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
 
 
+def _state(
+    t_s: float,
+    x: np.ndarray,
+    p: np.ndarray,
+    z_m: float,
+    history: tuple[tuple[float, np.ndarray, np.ndarray], ...],
+    gains: tuple[tuple[np.ndarray, np.ndarray], ...],
+) -> GaussianState:
+    """``GaussianState(t_s, x, p, z_m, history, gains)`` without the frozen-field cost.
+
+    A live tracker makes tens of thousands of states a second (a prediction per track
+    per scan); the dataclass constructor sets each field through ``object.__setattr__``.
+    """
+    state = object.__new__(GaussianState)
+    state.__dict__.update(t_s=t_s, x=x, P=p, z_m=z_m, history=history, gains=gains)
+    return state
+
+
 def _kalman(x: np.ndarray, p: np.ndarray, z_xy: np.ndarray, r: np.ndarray) -> tuple:
     """One linear update with measurement covariance ``r`` (2, 2); returns (x, P).
 
@@ -96,7 +114,7 @@ class KalmanFilter:
             gains = (*gains, self._smoother_step(state.history[-1], state.t_s))
         hist = (*state.history, (state.t_s, state.x, state.P))[-self.history_len :]
         kept = gains[-(len(hist) - 1) :] if gains is not None and len(hist) > 1 else ()
-        return GaussianState(state.t_s, state.x, state.P, state.z_m, hist, kept)
+        return _state(state.t_s, state.x, state.P, state.z_m, hist, kept)
 
     def _smoother_step(
         self, entry: tuple[float, np.ndarray, np.ndarray], t_next: float
@@ -132,7 +150,7 @@ class KalmanFilter:
         x, p = predict_kernel(
             state.x, state.P, self.motion.transition(dt), self.motion.covariance(dt)
         )
-        return GaussianState(t_s, x, p, state.z_m, state.history, state.gains)
+        return _state(t_s, x, p, state.z_m, state.history, state.gains)
 
     def gaussian(self, state: GaussianState) -> tuple[np.ndarray, np.ndarray]:
         """Horizontal position mean (2,) and covariance (2, 2)."""
@@ -145,7 +163,7 @@ class KalmanFilter:
         if not cands.mixture:
             x, p = _kalman(state.x, state.P, cands.z_enu[chosen, :2], cands.cov(chosen))
             z = float(cands.z_enu[chosen, 2])
-            out = GaussianState(state.t_s, x, p, z, state.history, state.gains)
+            out = _state(state.t_s, x, p, z, state.history, state.gains)
         else:
             out = self._pda(state, cands)
         return self._remember(out)
@@ -181,9 +199,13 @@ class KalmanFilter:
         Returns horizontal positions (2,), oldest first; at most ``history_len`` of them
         (none when smoothing is off). The newest equals the filtered estimate.
         """
+        return list(self.revise_xy(state, n))
+
+    def revise_xy(self, state: GaussianState, n: int) -> np.ndarray:
+        """:meth:`revise` as one array, shape (r, 2) (r = 0 when smoothing is off)."""
         hist = state.history[-n:] if n > 0 else ()
         if not hist:
-            return []
+            return np.zeros((0, 2))
         if len(state.gains) == len(state.history) - 1:
             steps = state.gains[len(state.gains) - (len(hist) - 1) :]
         else:
@@ -191,11 +213,11 @@ class KalmanFilter:
                 self._smoother_step(hist[k], hist[k + 1][0]) for k in range(len(hist) - 1)
             )
         if len(hist) == 1:
-            return [hist[0][1][:2].copy()]
+            return hist[0][1][None, :2].copy()
         xs = np.array([h[1] for h in hist])
         fs = np.array([f for f, _ in steps])
         gains = np.array([g for _, g in steps])
-        return list(rts_positions_kernel(xs, fs, gains))
+        return rts_positions_kernel(xs, fs, gains)
 
     def density(self, state: GaussianState, xy: np.ndarray, cov_xy: np.ndarray) -> float:
         """Predictive density (1/m^2) of a position ``xy`` (2,) known to ``cov_xy`` (2, 2)."""

@@ -14,6 +14,7 @@ slope behind), nearest first. The families differ only in what they read out:
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,13 +30,21 @@ def _cands(
     z: np.ndarray, sigma: np.ndarray, mixture: bool, cov: np.ndarray | None = None
 ) -> Candidates:
     m = z.shape[0]
-    return Candidates(
-        z_enu=np.asarray(z, dtype=np.float64).reshape(m, 3),
-        sigma_m=np.asarray(sigma, dtype=np.float64).reshape(m),
-        weight=np.full(m, 1.0 / m),
-        mixture=mixture,
-        cov_m2=None if cov is None else np.asarray(cov, dtype=np.float64).reshape(m, 2, 2),
+    return Candidates._trusted(
+        np.asarray(z, dtype=np.float64).reshape(m, 3),
+        np.asarray(sigma, dtype=np.float64).reshape(m),
+        _uniform(m),
+        mixture,
+        None if cov is None else np.asarray(cov, dtype=np.float64).reshape(m, 2, 2),
     )
+
+
+@functools.lru_cache(maxsize=64)
+def _uniform(m: int) -> np.ndarray:
+    """Equal weights ``1/m`` (m,), read-only and shared (a fix has a handful of hits)."""
+    w = np.full(m, 1.0 / m)
+    w.setflags(write=False)
+    return w
 
 
 def _covs(fix: Fix, index: slice) -> np.ndarray | None:

@@ -74,6 +74,22 @@ class Candidates:
     mixture: bool
     cov_m2: np.ndarray | None = None
 
+    @classmethod
+    def _trusted(
+        cls,
+        z_enu: np.ndarray,
+        sigma_m: np.ndarray,
+        weight: np.ndarray,
+        mixture: bool,
+        cov_m2: np.ndarray | None,
+    ) -> Candidates:
+        """Internal: the constructor's value without its per-field frozen-dataclass cost."""
+        out = object.__new__(cls)
+        out.__dict__.update(
+            z_enu=z_enu, sigma_m=sigma_m, weight=weight, mixture=mixture, cov_m2=cov_m2
+        )
+        return out
+
     def cov(self, j: int) -> np.ndarray:
         """Horizontal covariance (2, 2) of candidate ``j`` (m^2)."""
         if self.cov_m2 is not None:

@@ -22,6 +22,7 @@ and batch use give identical tracks.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -123,8 +124,36 @@ class _Record:
     exported: Track | None = None
 
 
-#: Below this many (track, candidate) pairs a scan gates track by track (less overhead).
-_BATCH_MIN_PAIRS = 12
+#: Up to this many (track, candidate) pairs a scan gates track by track. 0: a hypothesiser
+#: that can batch always does (its compiled gating costs less than one track's scalar
+#: gating; the two give the same hypotheses).
+_BATCH_MIN_PAIRS = 0
+
+
+def _measurement(fix: Fix, index: int) -> Measurement:
+    """``Measurement(fix, (index,), (fix.sensor,))`` without the frozen-field cost."""
+    m = object.__new__(Measurement)
+    m.__dict__.update(fix=fix, indices=(index,), sensors=(fix.sensor,))
+    return m
+
+
+def _nearest_height(z_enu: list[list[float]], x: float, y: float) -> float:
+    """Height of the first candidate horizontally nearest ``(x, y)`` (candidates ``[x, y, z]``).
+
+    In float arithmetic the same squared distances as
+    ``np.sum((z[:, :2] - xy) ** 2, axis=1)`` and the same pick as its ``argmin`` (the first
+    smallest, or the first NaN).
+    """
+    near, best = 0, math.inf
+    for j, (zx, zy, _) in enumerate(z_enu):
+        dx, dy = zx - x, zy - y
+        d = dx * dx + dy * dy
+        if d != d:  # NaN: argmin's pick
+            near = j
+            break
+        if j == 0 or d < best:
+            near, best = j, d
+    return z_enu[near][2]
 
 
 def _best(hyps: Sequence[SingleHypothesis | None]) -> SingleHypothesis | None:
@@ -355,7 +384,7 @@ class Tracker:
 
     # -------------------------------------------------------------- processing
     def _process(self, group: list[tuple[Fix, int]]) -> None:
-        meas = [Measurement(f, (i,), (f.sensor,)) for f, i in group]
+        meas = [_measurement(f, i) for f, i in group]
         if self.components.fuse and self.config.fuse_sensors and len(meas) > 1:
             meas = fuse_measurements(meas, self.config)
         scans: dict[tuple[float, str], list[Measurement]] = {}
@@ -396,7 +425,7 @@ class Tracker:
         recs: Sequence[_Record],
         items: Sequence[tuple[Measurement, Candidates]],
         allowed: Sequence[bool],
-        block: list[tuple[CandidateBlock, np.ndarray]],
+        block: list[tuple[CandidateBlock, list[str]]],
     ) -> list[list[SingleHypothesis | None]]:
         """:meth:`_hypothesise` for each of ``recs``.
 
@@ -408,15 +437,23 @@ class Tracker:
         if batched is None or len(recs) * n_cands <= _BATCH_MIN_PAIRS:
             return [self._hypothesise(r, items, allowed) for r in recs]
         if not block:
-            classes = np.array([m.cls for m, _ in items])
+            classes = [m.cls for m, _ in items]
             block.append((CandidateBlock.stack([c for _, c in items]), classes))
         stacked, classes = block[0]
-        gauss = [self.components.per_class[r.cls].filter.gaussian(r.state) for r in recs]
-        means = np.array([g[0] for g in gauss])
-        covs = np.array([g[1] for g in gauss])
-        cls = np.array([r.cls for r in recs])
-        mask = np.asarray(allowed, dtype=bool)[None, :] & (classes[None, :] == cls[:, None])
-        return batched(means, covs, stacked, mask)
+        per_class = self.components.per_class
+        means = np.empty((len(recs), 2))
+        covs = np.empty((len(recs), 2, 2))
+        rows: dict[str, list[bool]] = {}
+        mask = []
+        for i, r in enumerate(recs):
+            means[i], covs[i] = per_class[r.cls].filter.gaussian(r.state)
+            row = rows.get(r.cls)
+            if row is None:
+                row = rows[r.cls] = [
+                    a and c == r.cls for a, c in zip(allowed, classes, strict=True)
+                ]
+            mask.append(row)
+        return batched(means, covs, stacked, np.array(mask, dtype=bool))
 
     def _apply(
         self, rec: _Record, t: float, m: Measurement, cands: Candidates, hyp: SingleHypothesis
@@ -439,7 +476,7 @@ class Tracker:
     def _scan(self, t: float, meas: list[Measurement]) -> None:
         items = self._candidates(meas)
         # every track is gated against every measurement: candidates stacked once
-        block: list[tuple[CandidateBlock, np.ndarray]] = []
+        block: list[tuple[CandidateBlock, list[str]]] = []
         # End what coasted too long before it can take a fix: identity is not kept
         # across an absence longer than the limit, however wide the gate has grown.
         self._confirm_and_delete(t)
@@ -512,16 +549,35 @@ class Tracker:
         """Let the filter re-estimate the last ``n`` points (fixed-lag smoothing).
 
         ``z`` of a revised point is that of its fix's candidate nearest the new position.
+        A filter with ``revise_xy`` (:class:`~.kalman.KalmanFilter`) hands the positions
+        over as one (r, 2) array rather than a list of rows.
         """
         flt = self.components.per_class[rec.cls].filter
-        revised = flt.revise(rec.state, n)
+        as_array = getattr(flt, "revise_xy", None)
+        revised = flt.revise(rec.state, n) if as_array is None else as_array(rec.state, n)
+        if len(revised) == 0:
+            return
         first = len(rec.points) - len(revised)
         offset = len(rec.cands) - len(rec.points)
-        for k, xy in enumerate(revised, start=first):
-            old, z = rec.points[k], rec.cands[k + offset].z_enu
-            near = 0 if len(z) == 1 else int(np.argmin(np.sum((z[:, :2] - xy) ** 2, axis=1)))
-            p = np.array([xy[0], xy[1], z[near, 2]], dtype=np.float64)
-            rec.points[k] = old._moved(p)
+        # all revised positions in one (r, 3) array, checked once; each point gets its row
+        p_all = np.empty((len(revised), 3))
+        p_all[:, :2] = revised
+        cands = rec.cands
+        heights = []
+        total = 0.0  # finite only if every coordinate is (an overflow takes the long way)
+        for k, (x, y) in enumerate(p_all[:, :2].tolist()):
+            z = cands[first + k + offset].z_enu
+            h = z.item(0, 2) if len(z) == 1 else _nearest_height(z.tolist(), x, y)
+            heights.append(h)
+            total += x + y + h
+        p_all[:, 2] = heights
+        if not math.isfinite(total) and not np.isfinite(p_all).all():
+            raise TrackingError("p_enu must be finite")
+        points = rec.points
+        for k, row in enumerate(p_all, start=first):
+            p = row.copy()  # a point's own array (a view would keep all the rows alive)
+            p.setflags(write=False)
+            points[k] = points[k]._moved_trusted(p)
 
     def _confirm(self, rec: _Record, t: float) -> None:
         """Give ``rec`` an id and let its filter revise the points made while tentative.

@@ -1,7 +1,8 @@
 """Compile the tracker's numba kernels by tracking a tiny two-camera scene.
 
 The kernels (:mod:`~demtrack.core.tracking.fusion_kernels`,
-:mod:`~demtrack.core.tracking.kalman_kernels`) are compiled for the exact argument types
+:mod:`~demtrack.core.tracking.kalman_kernels`,
+:mod:`~demtrack.core.tracking.hypothesiser_kernels`) are compiled for the exact argument types
 the tracker passes (read-only fix arrays, cached read-only motion matrices, ...), so the
 surest warm-up is the tracker itself on a few fixes: an object walking in front of two
 cameras, each fix with a terrain hit and a tree-crown hit and full covariances. About

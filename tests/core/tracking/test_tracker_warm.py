@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from test_tracking_batched import _fix
 
-from demtrack.core.tracking import fusion_kernels, kalman_kernels
+from demtrack.core.tracking import fusion_kernels, hypothesiser_kernels, kalman_kernels
 from demtrack.core.tracking.methods import run_tracker
 from demtrack.core.tracking.warm import warm_up
 
@@ -16,6 +16,7 @@ KERNELS = (
     kalman_kernels.update_kernel,
     kalman_kernels.smoother_gain_kernel,
     kalman_kernels.rts_positions_kernel,
+    hypothesiser_kernels.gate_kernel,
 )
 
 
