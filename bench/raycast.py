@@ -5,12 +5,15 @@ Both engines get the same synthetic DEM (hills, flat-roofed buildings, trees; se
 the same cell-centre vertices, and the same rays, in the same process with the same
 thread count: numba via ``numba.set_num_threads``, Open3D via its ``nthreads`` arguments.
 
-Timings are the best of ``--repeat`` runs (the machine may be shared). Peak memory is the
-rise of the process's peak resident set size (``VmHWM``, reset through
-``/proc/self/clear_refs``) over its resident size just before the engine's set-up, so it
-covers set-up and every cast including the result arrays, and excludes the inputs (DEM,
-rays and, for Open3D, the mesh tensors handed to it). Without ``clear_refs`` it falls back
-to a plain RSS difference (a lower bound).
+Timings are the best of ``--repeat`` rounds; each round runs the two engines' casts of one
+ray set and mode in turn (demtrack, Open3D, demtrack, ...), so swings of load on a shared
+machine fall on both alike. Set-up and peak memory are measured first, per engine on its
+own (demtrack's before Open3D builds anything), with one untimed cast of each set that also
+gives the answers compared at the end. Peak memory is the rise of the process's peak
+resident set size (``VmHWM``, reset through ``/proc/self/clear_refs``) over its resident
+size just before the engine's set-up, so it covers set-up and every cast including the
+result arrays, and excludes the inputs (DEM, rays and, for Open3D, the mesh tensors handed
+to it). Without ``clear_refs`` it falls back to a plain RSS difference (a lower bound).
 
 Camera rays (one origin per camera) are cast with per-origin angular indexes
 (``core.angular_index``); their build is timed apart ("set-up per camera") and the
@@ -123,12 +126,14 @@ class _Result:
     rate: dict | None = None  # (set, mode) -> rays/s
     first_points: dict | None = None  # set -> (n, 3), NaN where no hit
     n_hits_all: dict | None = None  # set -> total crossings in mode "all"
-    casts: dict | None = None  # mode -> callable casting the camera set (1-thread timing)
+    casts: dict | None = None  # (set, mode) -> callable casting that set (timed in rounds)
+    one_thread: dict | None = None  # mode -> callable casting the camera set on 1 thread
 
 
 # ---------------------------------------------------------------------- engines
 def _run_ours(dem: SyntheticDem, sets: dict, repeat: int) -> _Result:
-    res = _Result(rate={}, first_points={}, n_hits_all={})
+    """Set up demtrack, cast each set once (memory, answers); ``res.casts`` for timing."""
+    res = _Result(rate={}, first_points={}, n_hits_all={}, casts={})
     with _PeakMemory() as mem:
         res.setup_s, caster = _best(lambda: RayCaster.from_dem(dem), repeat)
         # Per-origin set-up, timed apart: the angular index of every camera (the rays
@@ -150,29 +155,17 @@ def _run_ours(dem: SyntheticDem, sets: dict, repeat: int) -> _Result:
             if name == "camera":
                 variants = [(name, True), (name + " (pyramid only)", False)]
             for label, coherent in variants:
-                dt, hits = _best(
-                    lambda o=o, d=d, c=coherent: caster.cast(o, d, mode="first", coherent=c),
-                    repeat,
-                )
-                res.rate[label, "first"] = len(o) / dt
-                if label == name:
-                    res.first_points[name] = hits.first_points()
-                del hits
-                dt, hits = _best(
-                    lambda o=o, d=d, c=coherent: caster.cast(o, d, mode="all", coherent=c),
-                    repeat,
-                )
-                res.rate[label, "all"] = len(o) / dt
-                if label == name:
-                    res.n_hits_all[name] = int(len(hits.range_m))
-                del hits
+                for mode in ("first", "all"):
+                    fn = functools.partial(caster.cast, o, d, mode=mode, coherent=coherent)
+                    res.casts[label, mode] = fn
+                    hits = fn()
+                    if label == name and mode == "first":
+                        res.first_points[name] = hits.first_points()
+                    elif label == name:
+                        res.n_hits_all[name] = int(len(hits.range_m))
+                    del hits
         mem.sample()
     res.memory_mb = mem.peak_mb
-    o, d = sets["camera"]
-    res.casts = {
-        mode: functools.partial(caster.cast, o, d, mode=mode, coherent=True)
-        for mode in ("first", "all")
-    }
     return res
 
 
@@ -195,7 +188,8 @@ def _mesh(dem: SyntheticDem) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _run_open3d(o3d, dem: SyntheticDem, sets: dict, threads: int, repeat: int) -> _Result:
-    res = _Result(rate={}, first_points={}, n_hits_all={})
+    """Set up Open3D, cast each set once (memory, answers); ``res.casts`` for timing."""
+    res = _Result(rate={}, first_points={}, n_hits_all={}, casts={})
     verts, tris = _mesh(dem)
     v_t, t_t = o3d.core.Tensor(verts), o3d.core.Tensor(tris)
     del verts, tris
@@ -212,26 +206,58 @@ def _run_open3d(o3d, dem: SyntheticDem, sets: dict, threads: int, repeat: int) -
 
     with _PeakMemory() as mem:
         res.setup_s, scene = _best(build, repeat)
-        for name, (o, d) in sets.items():
+        for name, (o, _d) in sets.items():
             r = rays[name]
-            dt, ans = _best(lambda r=r: scene.cast_rays(r, nthreads=threads), repeat)
-            res.rate[name, "first"] = len(o) / dt
+            res.casts[name, "first"] = functools.partial(scene.cast_rays, r, nthreads=threads)
+            res.casts[name, "all"] = functools.partial(
+                scene.list_intersections, r, nthreads=threads
+            )
+            ans = res.casts[name, "first"]()
             t_hit = ans["t_hit"].numpy().astype(np.float64)
             res.first_points[name] = np.where(
-                np.isfinite(t_hit)[:, None], o + t_hit[:, None] * d, np.nan
+                np.isfinite(t_hit)[:, None], o + t_hit[:, None] * _d, np.nan
             )
             del ans
-            dt, ans = _best(lambda r=r: scene.list_intersections(r, nthreads=threads), repeat)
-            res.rate[name, "all"] = len(o) / dt
+            ans = res.casts[name, "all"]()
             res.n_hits_all[name] = int(ans["t_hit"].shape[0])
             del ans
         mem.sample()
     res.memory_mb = mem.peak_mb
-    res.casts = {
+    res.one_thread = {
         "first": functools.partial(scene.cast_rays, rays["camera"], nthreads=1),
         "all": functools.partial(scene.list_intersections, rays["camera"], nthreads=1),
     }
     return res
+
+
+def _time_rates(sets: dict, ours: _Result, theirs: _Result | None, repeat: int) -> None:
+    """Fill ``rate`` of both engines: best wall time of ``repeat`` rounds per cast.
+
+    Each round runs every engine's cast of one ray set and mode once, in turn (ours,
+    theirs, ours, theirs, ...), so load from other jobs on a shared machine falls on
+    both engines alike rather than on whichever was timed first.
+    """
+    for name, (o, _d) in sets.items():
+        for mode in ("first", "all"):
+            fns = {
+                ("ours", k): f
+                for k, f in (ours.casts or {}).items()
+                if k[1] == mode and k[0].split(" (")[0] == name
+            }
+            if theirs is not None and theirs.casts:
+                fns["theirs", (name, mode)] = theirs.casts[name, mode]
+            best = dict.fromkeys(fns, np.inf)
+            for _ in range(max(1, repeat)):
+                for key, fn in fns.items():
+                    gc.collect()
+                    t0 = time.perf_counter()
+                    out = fn()
+                    best[key] = min(best[key], time.perf_counter() - t0)
+                    del out
+            for (eng, k), t in best.items():
+                res = ours if eng == "ours" else theirs
+                if res is not None and res.rate is not None:
+                    res.rate[k] = len(o) / t
 
 
 # ---------------------------------------------------------------------- report
@@ -405,13 +431,17 @@ def main(argv: list[str] | None = None) -> int:
     else:
         why_not = "--no-open3d"
 
+    # Set-up and peak memory of each engine on its own (ours before Open3D builds
+    # anything); then the casts timed in rounds, the engines in turns.
     ours = _run_ours(dem, sets, args.repeat)
     theirs = _run_open3d(o3d, dem, sets, args.threads, args.repeat) if o3d else None
+    _time_rates(sets, ours, theirs, args.repeat)
     cpu = None
-    if theirs is not None and ours.casts and theirs.casts:
+    if theirs is not None and ours.casts and theirs.one_thread:
         # One thread, CPU time, the engines in turns: the per-ray cost without the
         # scheduling of a shared machine, which skews the rates at several threads.
-        engines = (("ours", ours.casts), ("theirs", theirs.casts))
+        mine = {mode: ours.casts["camera", mode] for mode in ("first", "all")}
+        engines = (("ours", mine), ("theirs", theirs.one_thread))
         cpu = _cpu_one_thread(
             {(eng, m): fn for eng, c in engines for m, fn in c.items()}, args.repeat, args.rays
         )

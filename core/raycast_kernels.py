@@ -44,6 +44,7 @@ __all__ = [
     "check_rays_kernel",
     "gather_hits_kernel",
     "hit_points_kernel",
+    "ray_order_kernel",
 ]
 
 # Status codes; ``core.raycast.RayStatus`` mirrors them (a test checks).
@@ -60,6 +61,8 @@ BLOCK = 64
 ROOT_WINDOW_M = 1e-6
 #: Crossings closer than this (m) to the previous one are the same crossing found twice.
 DEDUPE_M = 1e-5
+#: Side (cells, as a power of two) of the origin tiles :func:`ray_order_kernel` bins by.
+ORDER_TILE_SHIFT = 6
 
 
 @njit(parallel=True, cache=True)
@@ -492,6 +495,7 @@ def cast_kernel(
     first_only,
     max_hits,
     nthreads,
+    order,
     buf,
     counts,
     status,
@@ -508,6 +512,9 @@ def cast_kernel(
     origins, directions : float64 (n, 3), local frame; directions non-zero, any length
     max_range : float64 (n,), metres along the unit direction (may be inf)
     first_only : bool; max_hits : int >= 1; nthreads : numba's thread count
+    order : int64 (n,) or (0,): the results of input row ``q`` go to row ``order[q]``
+        of the outputs (the rays were copied in that order by :func:`ray_order_kernel`),
+        or to row ``q`` when empty
     buf : float64 (n, K) C-contiguous out; counts : int64 (n,) out (hits found, capped
     at max_hits); status : int8 (n,) out; crossed, truncated : bool (n,) out.
     """
@@ -515,11 +522,12 @@ def cast_kernel(
     cap = buf.shape[1]
     hits = buf.reshape(buf.size)
     nblocks = (n + BLOCK - 1) // BLOCK
+    ordered = order.shape[0] > 0
     # Block-interleaved: thread t takes blocks t, t + T, ... so coherent runs of rays
     # (one camera's pixels) are shared by all threads.
     for th in prange(nthreads):
         for blk in range(th, nblocks, nthreads):
-            for i in range(blk * BLOCK, min(n, (blk + 1) * BLOCK)):
+            for q in range(blk * BLOCK, min(n, (blk + 1) * BLOCK)):
                 st, gx0, gy0, kx, ky, uz, t_a, t_end = _prepare(
                     elev,
                     nodes,
@@ -531,18 +539,20 @@ def cast_kernel(
                     z_min,
                     z_max,
                     margin,
-                    origins[i, 0],
-                    origins[i, 1],
-                    origins[i, 2],
-                    directions[i, 0],
-                    directions[i, 1],
-                    directions[i, 2],
-                    max_range[i],
+                    origins[q, 0],
+                    origins[q, 1],
+                    origins[q, 2],
+                    directions[q, 0],
+                    directions[q, 1],
+                    directions[q, 2],
+                    max_range[q],
                 )
-                crossed[i] = False
-                truncated[i] = False
-                counts[i] = 0
+                # Outputs through the order (stores do not stall the walk as loads do).
+                i = order[q] if ordered else q
                 if st != HIT:
+                    crossed[i] = False
+                    truncated[i] = False
+                    counts[i] = 0
                     status[i] = st
                     continue
                 cnt, cr = _walk(
@@ -553,7 +563,7 @@ def cast_kernel(
                     margin,
                     gx0,
                     gy0,
-                    origins[i, 2],
+                    origins[q, 2],
                     kx,
                     ky,
                     uz,
@@ -566,9 +576,8 @@ def cast_kernel(
                     first_only,
                 )
                 crossed[i] = cr
-                if cnt > max_hits:
-                    truncated[i] = True
-                    cnt = max_hits
+                truncated[i] = cnt > max_hits
+                cnt = min(cnt, max_hits)
                 counts[i] = cnt
                 status[i] = HIT if cnt > 0 else MISS
 
@@ -680,6 +689,68 @@ def hit_points_kernel(origins, directions, rays, offsets, range_m, points):  # p
             points[j, 0] = origins[i, 0] + t * (dx / norm)
             points[j, 1] = origins[i, 1] + t * (dy / norm)
             points[j, 2] = origins[i, 2] + t * (dz / norm)
+
+
+@njit(parallel=True, cache=True)
+def ray_order_kernel(
+    origins, directions, max_range, x_min, y_max, cell, nrows, ncols, nthreads, o_out, d_out, r_out
+):  # pragma: no cover - numba
+    """A cast order for incoherent rays, grouped by origin tile and direction octant.
+
+    Rays that start in the same tile of ``2**ORDER_TILE_SHIFT`` cells and head into
+    the same octant walk mostly the same pyramid nodes and grid rows, so casting them
+    one after the other keeps those in cache (random rays over a large DEM otherwise
+    spend most of their time waiting on memory). A counting sort, stable within a
+    group, that also copies the rays into that order: ``o_out[q] = origins[order[q]]``
+    and the same for ``directions`` into ``d_out`` and ``max_range`` into ``r_out``
+    (written group by group as the input is read in order, which the caches absorb far
+    better than reads through the permutation). Each of ``nthreads`` threads sorts a
+    contiguous share of the rays into its own slots of each group, so the order is the
+    same for any thread count. Returns ``order``, int64 ``(n,)``.
+    """
+    n = origins.shape[0]
+    sh = ORDER_TILE_SHIFT
+    ntx = ((ncols - 1) >> sh) + 1
+    nty = ((nrows - 1) >> sh) + 1
+    n_keys = ntx * nty * 8
+    gxmax = float(ncols - 1)
+    gymax = float(nrows - 1)
+    keys = np.empty(n, np.int32)
+    # Row t of ``slots``: thread t's count per group, then its first slot in each group.
+    slots = np.zeros((nthreads, n_keys), np.int64)
+    for t in prange(nthreads):
+        for i in range(t * n // nthreads, (t + 1) * n // nthreads):
+            gx = min(max((origins[i, 0] - x_min) / cell, 0.0), gxmax)
+            gy = min(max((y_max - origins[i, 1]) / cell, 0.0), gymax)
+            dx = directions[i, 0]
+            dy = directions[i, 1]
+            octant = (
+                (4 if dx < 0.0 else 0) + (2 if dy < 0.0 else 0) + (1 if abs(dx) < abs(dy) else 0)
+            )
+            k = (((int(gy) >> sh) * ntx + (int(gx) >> sh)) << 3) + octant
+            keys[i] = k
+            slots[t, k] += 1
+    acc = 0
+    for k in range(n_keys):
+        for t in range(nthreads):
+            c = slots[t, k]
+            slots[t, k] = acc
+            acc += c
+    order = np.empty(n, np.int64)
+    for t in prange(nthreads):
+        for i in range(t * n // nthreads, (t + 1) * n // nthreads):
+            k = keys[i]
+            q = slots[t, k]
+            slots[t, k] = q + 1
+            order[q] = i
+            o_out[q, 0] = origins[i, 0]
+            o_out[q, 1] = origins[i, 1]
+            o_out[q, 2] = origins[i, 2]
+            d_out[q, 0] = directions[i, 0]
+            d_out[q, 1] = directions[i, 1]
+            d_out[q, 2] = directions[i, 2]
+            r_out[q] = max_range[i]
+    return order
 
 
 @njit(cache=True)
