@@ -187,27 +187,85 @@ def _range_box(
     return np.minimum(bot[k, i], bot[k, j0]), np.maximum(top[k, i], top[k, j0])
 
 
-def _last_inside(xy: np.ndarray, radius_m: float) -> np.ndarray:
+def _fits(
+    tables: tuple[np.ndarray, np.ndarray], i: np.ndarray, j: np.ndarray, radius_m: float
+) -> np.ndarray:
+    """Whether ``xy[i..j]`` fits the disc test (half its box's diagonal <= ``radius_m``)."""
+    box_lo, box_hi = _range_box(tables, i, j)
+    ext = box_hi - box_lo
+    return np.hypot(ext[:, 0], ext[:, 1]) / 2 <= radius_m
+
+
+def _last_inside(
+    xy: np.ndarray,
+    radius_m: float,
+    tables: tuple[np.ndarray, np.ndarray] | None = None,
+    starts: np.ndarray | None = None,
+    fitting: np.ndarray | None = None,
+) -> np.ndarray:
     """For each point ``i`` the last ``j`` such that ``xy[i..j]`` fits the disc test.
 
     ``xy`` (n, 2), m. A window fits when half its bounding box's diagonal is at most
     ``radius_m``; growing a window never makes it fit, so ``j`` is found by bisection
-    for all ``i`` at once, each window's box read from :func:`_range_tables`.
+    for all ``i`` at once, each window's box read from :func:`_range_tables`. With
+    ``starts`` (m,) only those points are searched (the result has shape (m,)), from
+    ``fitting`` (m,), an end known to fit for each.
     """
     n = len(xy)
-    tables = _range_tables(xy)
-    lo = np.arange(n)
-    hi = np.full(n, n - 1)
+    if tables is None:
+        tables = _range_tables(xy)
+    first = np.arange(n) if starts is None else starts
+    lo = first.copy() if fitting is None else fitting.copy()
+    hi = np.full(len(first), n - 1)
     while True:
         todo = np.flatnonzero(lo < hi)
         if not len(todo):
             return lo
         j = (lo[todo] + hi[todo] + 1) // 2
-        box_lo, box_hi = _range_box(tables, todo, j)
-        ext = box_hi - box_lo
-        fits = np.hypot(ext[:, 0], ext[:, 1]) / 2 <= radius_m
+        fits = _fits(tables, first[todo], j, radius_m)
         lo[todo] = np.where(fits, j, lo[todo])
         hi[todo] = np.where(fits, hi[todo], j - 1)
+
+
+def _first_lasting(t: np.ndarray, min_duration_s: float) -> np.ndarray:
+    """For each ``i`` the first ``j`` with ``t[j] - t[i] >= min_duration_s``, or ``n``.
+
+    ``t`` (n,) non-decreasing (s). The differences are computed as the test writes them
+    (a rounded ``t[i] + min_duration_s`` is only the first guess): ``t[j] - t[i]`` never
+    decreases with ``j``, so stepping forward from a guess at or before the answer finds it.
+    """
+    n = len(t)
+    slack = 1e-9 * (np.abs(t) + abs(min_duration_s) + 1.0)
+    j = np.minimum(np.searchsorted(t, t + min_duration_s - slack, side="left"), n)
+    j = np.maximum(j, np.arange(n))
+    while True:
+        short = np.flatnonzero(j < n)
+        short = short[t[j[short]] - t[short] < min_duration_s]
+        if not len(short):
+            return j
+        j[short] += 1
+
+
+def _loiter_ends(t: np.ndarray, xy: np.ndarray, params: LoiterParams) -> np.ndarray:
+    """Per point ``i``, :func:`_last_inside` where that window lasts ``min_duration_s``, else -1.
+
+    The same answer as ``_last_inside(xy)`` masked by ``t[end] - t >= min_duration_s``:
+    fitting is monotone, so ``i`` qualifies exactly when its shortest lasting window
+    ``xy[i..j]`` fits; only the points that qualify are bisected further.
+    """
+    n = len(t)
+    out = np.full(n, -1)
+    j = _first_lasting(t, params.min_duration_s)
+    i = np.flatnonzero(j < n)
+    if not len(i):
+        return out
+    tables = _range_tables(xy)
+    # (a window of one point lasts 0 s: it qualifies as the old test had it, fit or not)
+    i = i[_fits(tables, i, j[i], params.radius_m) | (j[i] == i)]
+    if not len(i):
+        return out
+    out[i] = _last_inside(xy, params.radius_m, tables, i, j[i])
+    return out
 
 
 def detect_loitering(
@@ -221,8 +279,8 @@ def detect_loitering(
         n = len(t)
         if n == 0:
             continue
-        best_end = _last_inside(p[:, :2], params.radius_m)
-        qualifies = t[best_end] - t >= params.min_duration_s
+        best_end = _loiter_ends(t, p[:, :2], params)
+        qualifies = best_end >= 0
         # a point is covered when some qualifying window starting at or before it reaches it
         covered = np.maximum.accumulate(np.where(qualifies, best_end, -1)) >= np.arange(n)
         for a, b in _runs(covered):
@@ -241,9 +299,10 @@ def detect_loitering(
     return out
 
 
-def _resample(tr: Trajectory, grid: np.ndarray) -> np.ndarray:
+def _resample(tr: Trajectory, grid: np.ndarray, dims: int = 3, first: int = 0) -> np.ndarray:
+    """Columns ``first .. first + dims - 1`` of the positions at times ``grid``, linearly."""
     t, p = np.asarray(tr.t_s, float), np.asarray(tr.p_enu, float)
-    return np.column_stack([np.interp(grid, t, p[:, k]) for k in range(3)])
+    return np.column_stack([np.interp(grid, t, p[:, k]) for k in range(first, first + dims)])
 
 
 def _step_s(t: np.ndarray) -> float:
@@ -340,10 +399,13 @@ def detect_rendezvous(
         if hi_t - lo_t < params.min_duration_s:
             continue
         grid = np.arange(lo_t, hi_t + 1e-9, params.dt_s)
-        pa, pb = _resample(trajectories[a], grid), _resample(trajectories[b], grid)
-        close = np.hypot(*(pa[:, :2] - pb[:, :2]).T) <= params.distance_m
+        # the horizontal test first: most pairs are never close, and their heights unread
+        xa, xb = _resample(trajectories[a], grid, 2), _resample(trajectories[b], grid, 2)
+        close = np.hypot(*(xa - xb).T) <= params.distance_m
         if not close.any():
             continue
+        pa = np.column_stack([xa, _resample(trajectories[a], grid, 1, 2)])
+        pb = np.column_stack([xb, _resample(trajectories[b], grid, 1, 2)])
         still = (_speed(pa, params.dt_s) < params.stop_speed_mps) & (
             _speed(pb, params.dt_s) < params.stop_speed_mps
         )
@@ -368,37 +430,36 @@ def detect_rendezvous(
 class _Drive:
     """One trajectory's figures for the convoy test, computed once per call.
 
-    ``s_m`` (n,) is the cumulative horizontal path length (m), ``moving`` (n,) the speed
-    (m/s); ``line``, ``points`` (shapely) and ``tables`` (:func:`_range_tables` of the
-    positions) are made when first needed.
+    ``s_m`` (n,) is the cumulative horizontal path length (m); ``moving`` (n,) the speed
+    (m/s), ``line`` (shapely) and ``tables`` (:func:`_range_tables` of the positions) are
+    made when first needed.
     """
 
     t: np.ndarray
     p: np.ndarray
     s_m: np.ndarray
-    moving: np.ndarray
+    _moving: np.ndarray | None = None
     _line: shapely.LineString | None = None
-    _points: np.ndarray | None = None
     _tables: tuple[np.ndarray, np.ndarray] | None = None
 
     @classmethod
     def of(cls, tr: Trajectory) -> _Drive:
         t, p = np.asarray(tr.t_s, float), np.asarray(tr.p_enu, float)
         seg = np.hypot(*np.diff(p[:, :2], axis=0).T)
-        moving = _speed(p, _step_s(t))
-        return cls(t, p, np.concatenate([[0.0], np.cumsum(seg)]), moving)
+        return cls(t, p, np.concatenate([[0.0], np.cumsum(seg)]))
+
+    @property
+    def moving(self) -> np.ndarray:
+        # only a possible follower's speed is read: most leaders never need it
+        if self._moving is None:
+            self._moving = _speed(self.p, _step_s(self.t))
+        return self._moving
 
     @property
     def line(self) -> shapely.LineString:
         if self._line is None:
             self._line = shapely.LineString(self.p[:, :2])
         return self._line
-
-    @property
-    def points(self) -> np.ndarray:
-        if self._points is None:
-            self._points = shapely.points(self.p[:, 0], self.p[:, 1])
-        return self._points
 
     @property
     def tables(self) -> tuple[np.ndarray, np.ndarray]:
@@ -408,20 +469,22 @@ class _Drive:
 
 
 def _follow_stretches(
-    leader: _Drive, follower: _Drive, params: ConvoyParams, cand: np.ndarray
-) -> list[tuple[float, float, float, float]]:
-    """Stretches where ``follower`` drives the leader's path a steady lag behind.
+    leader: _Drive, fleet: _Fleet, params: ConvoyParams, cand: np.ndarray
+) -> list[tuple[int, float, float, float, float]]:
+    """Stretches where a fleet trajectory drives the leader's path a steady lag behind.
 
-    Returns ``(t_start, t_end, median_lag_s, distance_m)`` per stretch. ``cand`` (n,)
-    marks the follower's points that pass the cheap necessary conditions
-    (:func:`_candidates`); the exact test (distance to the leader's path, lag) runs on
-    those only, and every other point fails it. A run of passing points is steady when
-    the running median of its lags (:func:`_running_median`, ``lag_window_s``) stays
-    within ``lag_tolerance`` of the run's median lag + 1 s.
+    Returns ``(follower, t_start, t_end, median_lag_s, distance_m)`` per stretch, in fleet
+    order (follower by follower, in time). ``cand`` (N,) marks the fleet points that pass
+    the cheap necessary conditions (:func:`_candidates`) of followers worth testing; the
+    exact test (distance to the leader's path, lag) runs on those only, for all followers
+    at once (each point's answer is its own), and every other point fails it. A run of
+    passing points of one follower is steady when the running median of its lags
+    (:func:`_running_median`, ``lag_window_s``) stays within ``lag_tolerance`` of the
+    run's median lag + 1 s.
     """
-    tl, tf, pf = leader.t, follower.t, follower.p
+    tl, tf, xy = leader.t, fleet.t, fleet.xy
     idx = np.flatnonzero(cand)
-    pts = follower.points[idx]
+    pts = fleet.points[idx]
     off_path = shapely.distance(pts, leader.line)
     s_on = shapely.line_locate_point(leader.line, pts)
     t_there = np.interp(s_on, leader.s_m, tl)  # when the leader was where the follower is
@@ -432,11 +495,11 @@ def _follow_stretches(
         (off_path <= params.path_tolerance_m)
         & (lag[idx] >= params.min_lag_s)
         & (lag[idx] <= params.max_lag_s)
-        & (follower.moving[idx] >= params.min_speed_mps)
+        & (fleet.moving[idx] >= params.min_speed_mps)
     )
     out = []
-    for a, b in _runs(ok):
-        dist = float(np.sum(np.hypot(*np.diff(pf[a:b, :2], axis=0).T)))
+    for a, b in _fleet_runs(fleet, ok):
+        dist = float(np.sum(np.hypot(*np.diff(xy[a:b], axis=0).T)))
         if dist < params.min_distance_m:
             continue
         lags = lag[a:b]
@@ -449,8 +512,16 @@ def _follow_stretches(
             and np.max(np.abs(_running_median(tf[a:b], lags, params.lag_window_s) - med)) > tol
         ):
             continue
-        out.append((float(tf[a]), float(tf[b - 1]), med, dist))
+        out.append((int(fleet.owner[a]), float(tf[a]), float(tf[b - 1]), med, dist))
     return out
+
+
+def _fleet_runs(fleet: _Fleet, ok: np.ndarray) -> list[tuple[int, int]]:
+    """Index ranges ``[start, stop)`` where ``ok`` (N,) holds, cut between trajectories."""
+    before = np.concatenate([[False], ok[:-1]]) & ~fleet.first
+    after = np.concatenate([ok[1:], [False]]) & ~fleet.last
+    r0, r1 = np.flatnonzero(ok & ~before), np.flatnonzero(ok & ~after)
+    return list(zip(r0.tolist(), (r1 + 1).tolist(), strict=True))
 
 
 @dataclass(eq=False)
@@ -469,6 +540,14 @@ class _Fleet:
     first: np.ndarray
     last: np.ndarray
     span: dict[int, tuple[int, int]]
+    _points: np.ndarray | None = None
+
+    @property
+    def points(self) -> np.ndarray:
+        """The points as shapely points (N,), made when first needed."""
+        if self._points is None:
+            self._points = shapely.points(self.xy[:, 0], self.xy[:, 1])
+        return self._points
 
     @classmethod
     def of(cls, drives: dict[int, _Drive], members: Sequence[int]) -> _Fleet:
@@ -563,11 +642,13 @@ def detect_convoys(
         after = np.concatenate([ok[1:], [False]]) & ~fleet.last
         r0, r1 = np.flatnonzero(ok & ~before), np.flatnonzero(ok & ~after)
         long_enough = fleet.s_m[r1] - fleet.s_m[r0] >= need
-        for b in np.unique(fleet.owner[r0[long_enough]]).tolist():
-            start, stop = fleet.span[b]
-            found = _follow_stretches(drives[a], drives[b], params, ok[start:stop])
-            for q0, q1, lag, dist in found:
-                pairs.append((a, b, q0, q1, lag, dist))
+        worth = np.unique(fleet.owner[r0[long_enough]])
+        if not len(worth):
+            continue
+        # the exact test on the candidates of the followers worth it, all at once
+        found = _follow_stretches(drives[a], fleet, params, ok & np.isin(fleet.owner, worth))
+        for b, q0, q1, lag, dist in found:
+            pairs.append((a, b, q0, q1, lag, dist))
     # Join pairs that share a vehicle and overlap in time (a leader-follower chain).
     groups: list[dict[str, Any]] = []
     for a, b, t0, t1, lag, dist in sorted(pairs, key=lambda q: q[2]):

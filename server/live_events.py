@@ -87,14 +87,17 @@ def _thin(track: Track, t_from: float, sample_s: float) -> Window | None:
         return None
     t = t[k0:]
     grid = np.arange(t[0], t[-1] + sample_s, sample_s)
-    keep = np.unique(np.minimum(np.searchsorted(t, grid), len(t) - 1))
-    keep = np.union1d(keep, [len(t) - 1])
-    pts = [track.points[k0 + k] for k in keep]
+    # sorted already (the grid increases): unique = drop repeats, then the last point
+    keep = np.minimum(np.searchsorted(t, grid), len(t) - 1)
+    keep = keep[np.concatenate(([True], keep[1:] != keep[:-1]))[: len(keep)]]
+    if not len(keep) or keep[-1] != len(t) - 1:
+        keep = np.append(keep, len(t) - 1)
+    pts = [track.points[k] for k in (keep + k0).tolist()]
     return Window(
         track.id,
         track.cls,
         t[keep],
-        np.stack([p.p_enu for p in pts]),
+        np.array([p.p_enu for p in pts], dtype=float),
         tuple(p.sensors for p in pts),
     )
 

@@ -239,3 +239,23 @@ def test_pruned_convoys_match_all_pairs_where_the_route_crosses_itself(seed):
     for cp in (ConvoyParams(), ConvoyParams(lag_window_s=0.0), LOOSE_CONVOY):
         assert as_tuples(detect_convoys(cars, cp)) == as_tuples(detect_convoys_reference(cars, cp))
     assert [len(e.track_ids) for e in detect_convoys(cars)] == [3]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_loitering_on_repeated_and_large_times_matches_the_two_pointer_walk(seed):
+    """The shortest lasting window is found from a rounded guess of ``t + min_duration_s``:
+    times far from 0, repeated times and durations that land exactly on a later time are
+    where the guess and the test's own ``t[j] - t[i]`` could disagree."""
+    rng = np.random.default_rng(seed)
+    n = 1500
+    steps = rng.choice([0.0, 0.1, 0.1, 0.3], n)
+    t = 86_400.0 * (seed + 1) + np.cumsum(steps)
+    xy = np.cumsum(rng.normal(0, 0.4, (n, 2)), axis=0)
+    walker = [Path(1, "human", t, np.column_stack([xy, np.zeros(n)]))]
+    found = 0
+    for radius, dwell in [(3.0, 6.0), (4.0, 0.3), (2.0, 0.0), (5.0, 12.1)]:
+        prm = LoiterParams(radius_m=radius, min_duration_s=dwell)
+        ref = detect_loitering_reference(walker, prm)
+        assert as_tuples(detect_loitering(walker, prm)) == as_tuples(ref)
+        found += len(ref)
+    assert found >= 2

@@ -63,3 +63,31 @@ def test_leaving_out_long_ended_tracks_changes_no_event(sample_site_dir, seed):
         kinds |= {e["kind"] for e in got}
     assert n_events > 0 and kinds & {"convoy", "rendezvous", "loitering"}
     assert Counting.left_out > 0  # the shortcut was taken
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_thinned_window_keeps_the_points_of_the_grid_rule(seed):
+    """``_thin`` keeps, per ``sample_s`` grid time, the first point at or after it, and the
+    last point (the rule written out with ``np.unique``/``np.union1d``, as it first was)."""
+    from demtrack.server.live_events import _thin
+
+    rng = np.random.default_rng(seed)
+    n = 400
+    t = 1000.0 + np.cumsum(rng.choice([0.0, 0.1, 0.1, 0.7], n))
+    xyz = rng.normal(0, 10, (n, 3))
+    track = Track(
+        7, "human", [TrackPoint(t[k], xyz[k], (f"cam{k % 3}",), (k,), None) for k in range(n)]
+    )
+    for t_from, sample_s in [(0.0, 0.5), (t[n // 2], 0.3), (t[-1], 0.5), (t[5] + 1e-9, 1.0)]:
+        k0 = int(np.searchsorted(t, t_from))
+        tt = t[k0:]
+        grid = np.arange(tt[0], tt[-1] + sample_s, sample_s)
+        keep = np.union1d(
+            np.unique(np.minimum(np.searchsorted(tt, grid), len(tt) - 1)), [len(tt) - 1]
+        )
+        w = _thin(track, t_from, sample_s)
+        assert w is not None
+        np.testing.assert_array_equal(w.t_s, tt[keep])
+        np.testing.assert_array_equal(w.p_enu, xyz[k0 + keep])
+        assert w.sensors == tuple((f"cam{(k0 + k) % 3}",) for k in keep)
+    assert _thin(track, t[-1] + 1.0, 0.5) is None
