@@ -208,19 +208,8 @@ def build_fixes(
     d = batch.directions_enu
     ground = np.column_stack([d[:, 0], d[:, 1], np.zeros(len(d))])
     norm = np.linalg.norm(ground, axis=1)
-    tilted = norm > 1e-9
-    shift = np.zeros_like(ground)
-    shift[tilted] = ground[tilted] * (offset[tilted] / norm[tilted])[:, None]
     ray = np.repeat(np.arange(len(d)), n_hits)
-    cov = batch.cov_en_m2 + var_across[ray][:, None, None] * np.eye(2)[None]
-    # The centre's unknown distance behind the foot, along the ray's ground track.
-    along = np.zeros((len(d), 2))
-    along[tilted] = ground[tilted, :2] / norm[tilted][:, None]
-    bent = tilted[ray]
-    a = along[ray[bent]]
-    cov[bent] += (var_along - var_across)[ray[bent]][:, None, None] * (
-        a[:, :, None] * a[:, None, :]
-    )
+    shift, cov = _centre_shift(ground, norm, offset, ray, batch.cov_en_m2, var_along, var_across)
     sigma = np.sqrt(np.linalg.eigvalsh(cov)[:, -1]) if len(cov) else np.zeros(0)
     hits_enu = batch.points_enu + shift[ray]
     origin_enu = batch.origins_enu + shift
@@ -232,6 +221,61 @@ def build_fixes(
         made = _checked_fixes(detections, order, *arrays)
     fixes = [made[i] for i in sorted(made)]
     return fixes, FixReport(len(detections), len(fixes), counts, n_multi)
+
+
+def _centre_shift(
+    ground: np.ndarray,
+    norm: np.ndarray,
+    offset: np.ndarray,
+    ray: np.ndarray,
+    cov_en_m2: np.ndarray,
+    var_along: np.ndarray,
+    var_across: np.ndarray,
+    masked: bool | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each ray's shift to the object's centre and each hit's covariance with the extent.
+
+    Parameters
+    ----------
+    ground : ndarray, shape (n, 3)
+        Ray directions with zero height: the ground tracks (not unit).
+    norm : ndarray, shape (n,)
+        Their lengths; at most 1e-9 (straight down) means no track: no shift, no along part.
+    offset, var_along, var_across : ndarray, shape (n,)
+        Foot-to-centre distance (m) and extent variances (m^2) per ray.
+    ray : ndarray, int, shape (k,)
+        The ray of each hit.
+    cov_en_m2 : ndarray, shape (k, 2, 2)
+        The geolocator's covariances (not modified).
+    masked : bool, optional
+        Force the general (masked) arithmetic or the all-tilted one; by default the
+        all-tilted one when every ray has a track. Both give the same bits there.
+
+    Returns
+    -------
+    shift : ndarray, shape (n, 3)
+    cov : ndarray, shape (k, 2, 2)
+    """
+    tilted = norm > 1e-9
+    cov = cov_en_m2 + var_across[ray][:, None, None] * np.eye(2)[None]
+    # The centre's unknown distance behind the foot, along the ray's ground track.
+    if masked is None:
+        masked = not tilted.all()
+    if not masked:  # the usual case: the same arithmetic without the masks
+        shift = ground * (offset / norm)[:, None]
+        a = (ground[:, :2] / norm[:, None])[ray]
+        cov += (var_along - var_across)[ray][:, None, None] * (a[:, :, None] * a[:, None, :])
+        return shift, cov
+    shift = np.zeros_like(ground)
+    shift[tilted] = ground[tilted] * (offset[tilted] / norm[tilted])[:, None]
+    along = np.zeros((len(ground), 2))
+    along[tilted] = ground[tilted, :2] / norm[tilted][:, None]
+    bent = tilted[ray]
+    a = along[ray[bent]]
+    cov[bent] += (var_along - var_across)[ray[bent]][:, None, None] * (
+        a[:, :, None] * a[:, None, :]
+    )
+    return shift, cov
 
 
 def _trusted_fixes(
@@ -273,10 +317,12 @@ def _trusted_fixes(
         lo, hi = int(offsets[r]), int(offsets[r + 1])
         if lo == hi:
             continue
-        norm = float(np.linalg.norm(d[r]))
+        d_r = d[r]
+        # np.linalg.norm of a 1-D float array is sqrt(x.dot(x)); the same bits, one call.
+        norm = math.sqrt(d_r.dot(d_r))
         if norm == 0.0:
             return None
-        direction = d[r] / norm
+        direction = d_r / norm
         direction.setflags(write=False)
         det_i = detections[i]
         made[i] = Fix._trusted(

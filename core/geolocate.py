@@ -24,7 +24,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from .camera import distortion_jacobian
+from .camera import Camera, distortion_jacobian
 from .dem import Dem
 from .errors import CameraError
 from .raycast import RayStatus, cast_rays
@@ -335,11 +335,17 @@ class Geolocator:
         rays = []
         for camera, u, v in views:
             u_arr, v_arr = _pixels(camera, u, v)
+            if type(camera) is Camera:
+                # One undistortion per pixel for the ray and its perturbations.
+                rays.append(_rays_and_perturbations(camera, u_arr, v_arr, self.pixel_sigma_px))
+                continue
             origins, dirs = camera.pixel_to_ray(u_arr, v_arr)
             axes, sig = _pixel_perturbations(camera, u_arr, v_arr, self.pixel_sigma_px)
             rays.append((origins, dirs, axes, sig))
         if not rays:
             rays.append((np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 2, 3)), np.zeros((0, 2))))
+        if len(rays) == 1:
+            return self.locate_rays(*rays[0])
         return self.locate_rays(*(np.concatenate(parts) for parts in zip(*rays, strict=True)))
 
     def locate_rays(
@@ -388,17 +394,19 @@ class Geolocator:
         rng_all = np.concatenate([result.range_m, road_rng])
         x, y = p_all[:, 0], p_all[:, 1]
         gx, gy = self.dem.gradient(x, y)
-        grad = np.column_stack([np.nan_to_num(gx), np.nan_to_num(gy)])
-        var_z = np.nan_to_num(self.dem.sample_variance(x, y), nan=0.0)
+        grad = np.column_stack([_finite_or_zero(gx), _finite_or_zero(gy)])
+        var_z = _finite_or_zero(self.dem.sample_variance(x, y))
         cov = hit_covariances(
             d[ray_all], rng_all, grad, axes[ray_all], sig[ray_all], np.sqrt(np.maximum(var_z, 0))
         )
         sigma = np.sqrt(np.linalg.eigvalsh(cov)[:, -1]) if len(cov) else np.zeros(0)
         m = len(result.range_m)
-        road_enu = np.full((n, 3), np.nan)
-        road_range = np.full(n, np.nan)
-        road_sigma = np.full(n, np.nan)
-        road_cov = np.full((n, 2, 2), np.nan)
+        road_all = np.empty(n * 9)  # one buffer: point (3), range, sigma, covariance (4)
+        road_all.fill(np.nan)
+        road_enu = road_all[: 3 * n].reshape(n, 3)
+        road_range = road_all[3 * n : 4 * n]
+        road_sigma = road_all[4 * n : 5 * n]
+        road_cov = road_all[5 * n :].reshape(n, 2, 2)
         road_enu[road_rays] = road_p
         road_range[road_rays] = road_rng
         road_sigma[road_rays] = sigma[m:]
@@ -484,6 +492,60 @@ def _pixels(camera, u: Any, v: Any) -> tuple[np.ndarray, np.ndarray]:
     return u_arr, v_arr
 
 
+def _finite_or_zero(a: np.ndarray) -> np.ndarray:
+    """``np.nan_to_num(a)``, without its work when every value is finite already."""
+    return a if np.isfinite(a).all() else np.nan_to_num(a)
+
+
+def _rays_and_perturbations(
+    camera: Camera, u: np.ndarray, v: np.ndarray, sigma_px: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``camera.pixel_to_ray(u, v)`` and :func:`_pixel_perturbations`, undistorting once.
+
+    The same arithmetic in the same order as the two calls, so the same bits; the unit
+    ray of the perturbations is the ray's camera-frame direction.
+    """
+    intr = camera.intrinsics
+    xn, yn = intr.undistort(u, v)
+    ray = np.stack([xn, yn, np.ones_like(xn)], axis=-1)
+    norm = np.linalg.norm(ray, axis=-1, keepdims=True)
+    unit = ray / norm
+    rot_t = camera.R_world_cam.T
+    directions = unit @ rot_t
+    origins = np.empty_like(directions)
+    origins[:] = camera.position_enu
+    axes, sig = _perturbations_from_unit(intr, xn, yn, unit, norm, rot_t, sigma_px)
+    return origins, directions, axes, sig
+
+
+def _perturbations_from_unit(
+    intr,
+    xn: np.ndarray,
+    yn: np.ndarray,
+    unit: np.ndarray,
+    norm: np.ndarray,
+    rot_t: np.ndarray,
+    sigma_px: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The body of :func:`_pixel_perturbations` after its unit rays are known."""
+    a, b, c, d = distortion_jacobian(xn, yn, *intr.coeffs)
+    det = a * d - b * c
+    n = len(xn)
+    # Columns of the inverse Jacobian, per pixel: d(xn, yn)/du and d(xn, yn)/dv.
+    d_du = np.zeros((n, 3))
+    d_du[:, 0] = d / (det * intr.fx)
+    d_du[:, 1] = -c / (det * intr.fx)
+    d_dv = np.zeros((n, 3))
+    d_dv[:, 0] = -b / (det * intr.fy)
+    d_dv[:, 1] = a / (det * intr.fy)
+    turn = np.empty((n, 2, 3))  # d(unit ray)/d(u, v), site frame, rad/px
+    for k, dray in enumerate((d_du, d_dv)):
+        perp = dray - unit * np.sum(unit * dray, axis=-1, keepdims=True)
+        turn[:, k] = (perp / norm) @ rot_t
+    speed = np.linalg.norm(turn, axis=-1)
+    return turn / speed[..., None], sigma_px * speed
+
+
 def _pixel_perturbations(
     camera, u: np.ndarray, v: np.ndarray, sigma_px: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -504,6 +566,10 @@ def _pixel_perturbations(
     ``D = (xn, yn, 1)`` turns by the part of ``dD`` perpendicular to it, over ``|D|``.
     Taking the camera's x and y axes with ``sigma_px / f`` instead overstates the angle by
     ``|D|`` off the optical axis (12 % at the corners of a 640 x 480 image with f = 800 px).
+
+    :meth:`Geolocator.locate_pixels` uses :func:`_rays_and_perturbations` for a
+    :class:`Camera` (one undistortion for the ray and this); this stays the reference
+    it is tested against, bit for bit, and the path for other camera types.
     """
     intr = camera.intrinsics
     xn, yn = intr.undistort(u, v)

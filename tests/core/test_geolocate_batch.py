@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import shapely
 
+from demtrack.core import fix_builder as fix_builder_mod
 from demtrack.core import geolocate as geolocate_mod
 from demtrack.core import raycast as raycast_mod
 from demtrack.core.fix_builder import build_fixes
@@ -243,3 +244,66 @@ def test_bulk_road_rule_with_a_track_along_a_road_and_through_a_vertex(site):
         assert want is not None and got.found[i]
         np.testing.assert_allclose(got.p_enu[i], want.p_enu, rtol=0, atol=1e-9)
         assert got.road_index[i] == want.road_index
+
+
+def test_rays_and_perturbations_in_one_pass_equal_the_camera_and_the_reference(site):
+    """The fused helper gives pixel_to_ray's rays and _pixel_perturbations' bits."""
+    for cam, u, v in _random_views(site, 200, seed=11):
+        w, h = cam.intrinsics.width, cam.intrinsics.height
+        u = np.concatenate([u, [-0.5, w - 0.5, -0.5, w - 0.5, (w - 1) / 2]])
+        v = np.concatenate([v, [-0.5, -0.5, h - 0.5, h - 0.5, (h - 1) / 2]])
+        o, d, axes, sig = geolocate_mod._rays_and_perturbations(cam, u, v, 1.5)
+        o_ref, d_ref = cam.pixel_to_ray(u, v)
+        axes_ref, sig_ref = geolocate_mod._pixel_perturbations(cam, u, v, 1.5)
+        for got, want in ((o, o_ref), (d, d_ref), (axes, axes_ref), (sig, sig_ref)):
+            assert got.shape == want.shape
+            np.testing.assert_array_equal(got, want)
+
+
+class _WrappedCamera:
+    """A camera that is not a Camera: locate_pixels takes its general path."""
+
+    def __init__(self, cam) -> None:
+        self._cam = cam
+        self.intrinsics = cam.intrinsics
+        self.R_world_cam = cam.R_world_cam
+
+    def pixel_to_ray(self, u, v):
+        return self._cam.pixel_to_ray(u, v)
+
+
+def test_locate_pixels_fast_path_equals_the_general_path(site):
+    geo = site.geolocator()
+    views = _random_views(site, 60, seed=12)
+    fast = geo.locate_pixels(views)
+    general = geo.locate_pixels([(_WrappedCamera(c), u, v) for c, u, v in views])
+    one = geo.locate_pixels(views[:1])
+    one_general = geo.locate_pixels([(_WrappedCamera(c), u, v) for c, u, v in views[:1]])
+    for name in vars(fast):
+        np.testing.assert_array_equal(getattr(fast, name), getattr(general, name))
+        np.testing.assert_array_equal(getattr(one, name), getattr(one_general, name))
+
+
+def test_centre_shift_without_masks_equals_the_masked_arithmetic():
+    rng = np.random.default_rng(3)
+    n = 40
+    ground = rng.normal(size=(n, 3))
+    ground[:, 2] = 0.0
+    norm = np.linalg.norm(ground, axis=1)
+    ray = np.repeat(np.arange(n), rng.integers(0, 3, n))
+    a = rng.normal(size=(len(ray), 2, 2))
+    cov = a @ np.swapaxes(a, 1, 2)
+    offset, var_along, var_across = (rng.uniform(0.1, 2.0, n) for _ in range(3))
+    args = (ground, norm, offset, ray, cov, var_along, var_across)
+    fast = fix_builder_mod._centre_shift(*args)
+    masked = fix_builder_mod._centre_shift(*args, masked=True)
+    for got, want in zip(fast, masked, strict=True):
+        np.testing.assert_array_equal(got, want)
+    # A straight-down ray takes the masked path: no shift, no along part.
+    ground[0, :2] = 0.0
+    norm[0] = 0.0
+    shift, cov_out = fix_builder_mod._centre_shift(*args)
+    np.testing.assert_array_equal(shift[0], 0.0)
+    np.testing.assert_array_equal(shift[1:], masked[0][1:])
+    hits0 = ray == 0
+    np.testing.assert_array_equal(cov_out[hits0], cov[hits0] + var_across[0] * np.eye(2))
