@@ -1,9 +1,9 @@
 """The terrain surface: bilinear interpolation of cell-centre values.
 
 One function, shared by :meth:`Dem.sample`, hole filling and the reference ray caster, so
-the surface that is sampled is exactly the surface that rays hit. It runs a numba loop
-(``core.surface_kernels``); :func:`bilinear_sample_reference` is its numpy twin, the same
-arithmetic in the same order, so the two agree bit for bit.
+the surface that is sampled is exactly the surface that rays hit. Small calls run a numba
+loop (``core.surface_kernels``), large ones :func:`bilinear_sample_reference`, its numpy
+twin: the same arithmetic in the same order, so the two agree bit for bit.
 """
 
 from __future__ import annotations
@@ -11,7 +11,12 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ["bilinear_sample", "bilinear_sample_reference"]
+__all__ = ["KERNEL_MAX_POINTS", "bilinear_sample", "bilinear_sample_reference"]
+
+#: Calls with more points take the numpy form (the same bits): its per-call overhead no
+#: longer matters there, and the sample site's build (hole filling, rendering: hundreds of
+#: thousands of points) then never compiles the kernel on a cold start's critical path.
+KERNEL_MAX_POINTS = 4096
 
 
 def bilinear_sample(values: np.ndarray, gx: ArrayLike, gy: ArrayLike) -> np.ndarray:
@@ -30,10 +35,12 @@ def bilinear_sample(values: np.ndarray, gx: ArrayLike, gy: ArrayLike) -> np.ndar
         NaN outside ``[0, ncols-1] x [0, nrows-1]`` or where any of the four
         surrounding centres is NaN.
     """
-    from .surface_kernels import bilinear_kernel  # numba loads on first use
-
     values = np.asarray(values)
     gx, gy = np.broadcast_arrays(np.asarray(gx, dtype=np.float64), np.asarray(gy, dtype=np.float64))
+    if gx.size > KERNEL_MAX_POINTS:
+        return bilinear_sample_reference(values, gx, gy)
+    from .surface_kernels import bilinear_kernel  # numba loads on first use
+
     out = np.empty(gx.shape)
     if out.size:
         bilinear_kernel(

@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from demtrack.core import surface
 from demtrack.core.surface import bilinear_sample, bilinear_sample_reference
 
 
@@ -57,3 +58,15 @@ def test_shapes_broadcast_and_read_only_inputs() -> None:
     # a plane is reproduced exactly: z = 4 * row + column
     np.testing.assert_allclose(out, 4 * gy + gx)
     assert bilinear_sample(z, np.zeros(0), np.zeros(0)).shape == (0,)
+
+
+def test_large_calls_take_the_numpy_twin_with_the_same_bits(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    rng = np.random.default_rng(3)
+    z = _grid(rng, 30, 30, np.float32, holes=0.05)
+    gx, gy = rng.uniform(-1, 30, 600), rng.uniform(-1, 30, 600)
+    small = bilinear_sample(z, gx, gy)  # the kernel
+    monkeypatch.setattr(surface, "KERNEL_MAX_POINTS", 100)
+    large = bilinear_sample(z, gx, gy)  # now the numpy form
+    assert small.tobytes() == large.tobytes()
