@@ -31,9 +31,10 @@ Tables
 
 from __future__ import annotations
 
+import contextlib
 import sqlite3
 import threading
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -300,12 +301,17 @@ def _split_track_body(row: Mapping[str, Any]) -> tuple[str, list[str], int]:
     return head, [dumps_json(p) for p in body.get("points", ())], 0
 
 
+def _id_chunks(ids: Sequence[int], size: int = 500) -> Iterator[tuple[list[int], str]]:
+    """``ids`` in chunks, each with its ``?,?,...`` placeholders for an ``IN (...)``."""
+    for k in range(0, len(ids), size):
+        chunk = list(ids[k : k + size])
+        yield chunk, ",".join("?" * len(chunk))
+
+
 def _points_of(c: sqlite3.Connection, ids: Sequence[int]) -> dict[int, list[str]]:
     """The stored point texts of tracks ``ids``, in order (an empty list for none)."""
     out: dict[int, list[str]] = {i: [] for i in ids}
-    for k in range(0, len(ids), 500):
-        chunk = list(ids[k : k + 500])
-        marks = ",".join("?" * len(chunk))
+    for chunk, marks in _id_chunks(ids):
         for tid, point in c.execute(
             f"SELECT track_id, point FROM track_points WHERE track_id IN ({marks})"  # noqa: S608
             " ORDER BY track_id, k",
@@ -583,6 +589,16 @@ class Store:
         return self._tx(run, sync=False)  # derived rows: see the module docstring
 
     # ------------------------------------------------------------------ reading
+    @contextlib.contextmanager
+    def _snapshot(self) -> Iterator[sqlite3.Connection]:
+        """The read connection inside one read transaction: its reads see one snapshot."""
+        with self._rlock:
+            self._r.execute("BEGIN")
+            try:
+                yield self._r
+            finally:
+                self._r.execute("COMMIT")
+
     def _rows(self, sql: str, params: Sequence[Any] = ()) -> list[tuple[Any, ...]]:
         with self._rlock:
             return self._r.execute(sql, params).fetchall()
@@ -679,16 +695,12 @@ class Store:
         caller clips the points.
         """
         where, params = _track_where(t_from, t_to, cls, bbox)
-        with self._rlock:
-            self._r.execute("BEGIN")  # heads and points from one snapshot
-            try:
-                rows = self._r.execute(
-                    f"SELECT id, body FROM tracks{where} ORDER BY id",  # noqa: S608
-                    params,
-                ).fetchall()
-                points = _points_of(self._r, [i for i, _ in rows])
-            finally:
-                self._r.execute("COMMIT")
+        with self._snapshot() as r:  # heads and points from one snapshot
+            rows = r.execute(
+                f"SELECT id, body FROM tracks{where} ORDER BY id",  # noqa: S608
+                params,
+            ).fetchall()
+            points = _points_of(r, [i for i, _ in rows])
         return [loads_json(track_body_text(head, points[i])) for i, head in rows]
 
     def track_rows(
@@ -707,41 +719,29 @@ class Store:
         so only new and changed bodies are read. Both reads see one snapshot of the file.
         """
         where, params = _track_where(t_from, t_to, cls, bbox)
-        with self._rlock:
-            self._r.execute("BEGIN")
-            try:
-                heads = self._r.execute(
-                    f"SELECT id, {_REV} FROM tracks{where} ORDER BY id",  # noqa: S608
-                    params,
-                ).fetchall()
-                todo = [i for i, rev in heads if known.get(i) != rev]
-                texts: dict[int, tuple[int, str]] = {}
-                points = _points_of(self._r, todo)
-                for k in range(0, len(todo), 500):
-                    chunk = todo[k : k + 500]
-                    marks = ",".join("?" * len(chunk))
-                    for i, rev, body in self._r.execute(
-                        f"SELECT id, {_REV}, body FROM tracks WHERE id IN ({marks})",  # noqa: S608
-                        chunk,
-                    ):
-                        texts[i] = (rev, track_body_text(body, points[i]))
-            finally:
-                self._r.execute("COMMIT")
+        with self._snapshot() as r:
+            heads = r.execute(
+                f"SELECT id, {_REV} FROM tracks{where} ORDER BY id",  # noqa: S608
+                params,
+            ).fetchall()
+            todo = [i for i, rev in heads if known.get(i) != rev]
+            texts: dict[int, tuple[int, str]] = {}
+            points = _points_of(r, todo)
+            for chunk, marks in _id_chunks(todo):
+                for i, rev, body in r.execute(
+                    f"SELECT id, {_REV}, body FROM tracks WHERE id IN ({marks})",  # noqa: S608
+                    chunk,
+                ):
+                    texts[i] = (rev, track_body_text(body, points[i]))
         return [(i, *texts[i]) if i in texts else (i, rev, None) for i, rev in heads]
 
     def track(self, track_id: int) -> dict[str, Any] | None:
         """The body of track ``track_id`` (None if there is none), by its primary key."""
         if not -(2**63) <= int(track_id) < 2**63:  # beyond SQLite's integers: no such track
             return None
-        with self._rlock:
-            self._r.execute("BEGIN")
-            try:
-                rows = self._r.execute(
-                    "SELECT body FROM tracks WHERE id = ?", (int(track_id),)
-                ).fetchall()
-                points = _points_of(self._r, [int(track_id)]) if rows else {}
-            finally:
-                self._r.execute("COMMIT")
+        with self._snapshot() as r:
+            rows = r.execute("SELECT body FROM tracks WHERE id = ?", (int(track_id),)).fetchall()
+            points = _points_of(r, [int(track_id)]) if rows else {}
         return loads_json(track_body_text(rows[0][0], points[int(track_id)])) if rows else None
 
     def activity(
