@@ -64,19 +64,20 @@ export async function getOptionalJSON(path) {
   return (await check(resp, path)).json();
 }
 
-export async function postJSON(path, body) {
-  return sendJSON("POST", path, body);
+export async function postJSON(path, body, { signal } = {}) {
+  return sendJSON("POST", path, body, signal);
 }
 
-export async function putJSON(path, body) {
-  return sendJSON("PUT", path, body);
+export async function putJSON(path, body, { signal } = {}) {
+  return sendJSON("PUT", path, body, signal);
 }
 
-async function sendJSON(method, path, body) {
+async function sendJSON(method, path, body, signal) {
   const resp = await fetch(path, {
     method,
     headers: headers({ "Content-Type": "application/json" }),
     body: JSON.stringify(body),
+    signal,
   });
   return (await check(resp, path)).json();
 }

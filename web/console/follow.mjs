@@ -9,10 +9,30 @@
 // scene reads the path of each connection (server/scene3d.py).
 //
 // One request in flight; the newest choice wins (a quick re-selection sends only the
-// last one once the first answer is in). Failures are shown, never thrown: the 3D view is
-// an extra, the map keeps working without it.
+// last one once the first answer is in). A request that fails on the way (no answer, a
+// dropped connection, a 5xx from a busy or restarting server) is sent again after a growing
+// pause, up to RETRY_DELAYS_MS.length times; a refusal (4xx, e.g. a track the server does not
+// have) is final. Failures are shown, never thrown: the 3D view is an extra, the map keeps
+// working without it.
 
 import * as api from "./api.mjs";
+
+/** Pauses before each resend of a request that failed on the way (ms). */
+export const RETRY_DELAYS_MS = [250, 500, 1000, 2000, 4000, 8000];
+
+/** A request with no answer after this long is given up and sent again (ms). */
+export const REQUEST_TIMEOUT_MS = 10000;
+
+/** Whether a failed request is worth sending again: no answer (or none in time), or a 5xx. */
+export function isTransient(err) {
+  return (
+    err instanceof TypeError ||
+    err?.name === "TimeoutError" ||
+    (typeof err?.status === "number" && err.status >= 500)
+  );
+}
+
+const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
 
 /** A new follow session id: 32 hex digits (crypto.getRandomValues works over plain http). */
 export function newSession() {
@@ -36,7 +56,7 @@ export function viserFrameUrl(viserUrl, session) {
 export class SceneFollow {
   /**
    * @param {boolean} enabled  whether the server runs a 3D scene
-   * @param {(state: object) => void} onChange  called with {trackId, pending, error, answer}
+   * @param {(state: object) => void} onChange  called with {trackId, pending, error, retrying, answer}
    * @param {string} session  this page's follow session (default: a new one)
    */
   constructor(enabled, onChange = () => {}, session = newSession()) {
@@ -48,7 +68,9 @@ export class SceneFollow {
     this.inFlight = false;
     this.error = null;
     this.answer = null; // the server's last answer (track_id, look_at_enu, clients)
-    this.requests = 0;
+    this.requests = 0; // PUTs sent, resends included
+    this.retries = 0; // resends after a failure on the way
+    this.retrying = false; // waiting to send again after a failure on the way
   }
 
   /** Follow `trackId` (null stops following). */
@@ -62,22 +84,47 @@ export class SceneFollow {
     if (this.inFlight || this.want === this.sent) return;
     this.inFlight = true;
     const id = this.want;
-    this.requests += 1;
+    let settled = false; // answered, refused, or out of tries (not overtaken by a newer choice)
     this.notify();
-    try {
-      this.answer = await api.putJSON("/api/scene3d/follow", { track_id: id, session: this.session });
-      this.error = null;
-    } catch (err) {
-      this.error = String(err.message || err);
-    } finally {
-      this.sent = id; // also after a failure: do not retry in a loop
-      this.inFlight = false;
+    for (let attempt = 0; ; attempt += 1) {
+      this.requests += 1;
+      try {
+        this.answer = await api.putJSON(
+          "/api/scene3d/follow",
+          { track_id: id, session: this.session },
+          { signal: AbortSignal.timeout(REQUEST_TIMEOUT_MS) },
+        );
+        this.error = null;
+        settled = true;
+        break;
+      } catch (err) {
+        this.error = String(err.message || err);
+        if (!isTransient(err) || attempt >= RETRY_DELAYS_MS.length) {
+          settled = true;
+          break;
+        }
+        this.retries += 1;
+        this.retrying = true;
+        this.notify();
+        await sleep(RETRY_DELAYS_MS[attempt]);
+        this.retrying = false;
+        if (this.want !== id) break; // a newer choice goes instead
+      }
     }
+    // After a final failure too: no loop; the operator's next choice tries again.
+    this.sent = settled ? id : undefined;
+    this.inFlight = false;
     this.notify();
     if (this.want !== this.sent) this.pump();
   }
 
   notify() {
-    this.onChange({ trackId: this.want, pending: this.inFlight, error: this.error, answer: this.answer });
+    this.onChange({
+      trackId: this.want,
+      pending: this.inFlight,
+      error: this.error,
+      retrying: this.retrying,
+      answer: this.answer,
+    });
   }
 }

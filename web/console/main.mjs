@@ -738,12 +738,12 @@ function wireControls() {
 }
 
 /** The 3D view's note: which track its cameras follow (or why they do not). */
-function showFollow({ trackId, pending, error }) {
+function showFollow({ trackId, pending, error, retrying }) {
   const note = $("#follow-3d");
   note.classList.toggle("hidden", trackId === null && !error);
   note.classList.toggle("error", !!error);
   note.textContent = error
-    ? `3D follow failed: ${error}`
+    ? `3D follow ${retrying ? "failed, trying again" : "failed"}: ${error}`
     : trackId === null ? "" : `3D cameras follow track #${trackId}${pending ? " …" : ""} · Esc stops`;
 }
 
