@@ -5,6 +5,10 @@ serialised once and handed to every client's queue on the event loop, in sequenc
 (``call_soon_threadsafe`` runs callbacks in the order they were scheduled). A client whose
 queue is full is dropped (closed with code 1013, "try again later") instead of slowing
 the others; it reconnects with ``?since=N`` and gets what it missed from the event log.
+
+A client that opted in (``/ws?batch=1``) is sent, whenever its queue holds several
+messages, one ``batch`` frame carrying them in order (:func:`take`, :func:`pack`): the
+envelope is joined from the already-encoded texts, never re-encoded.
 """
 
 from __future__ import annotations
@@ -14,18 +18,37 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from .db import dumps_json
+from .messages import BATCH_MAX_MESSAGES as _BATCH_MAX
 
-__all__ = ["Client", "Hub", "OVERFLOW"]
+__all__ = [
+    "BATCH_MAX_CHARS",
+    "BATCH_MAX_MESSAGES",
+    "Client",
+    "Hub",
+    "OVERFLOW",
+    "batch_text",
+    "pack",
+    "take",
+]
 
 #: Put in a client's queue when it overflowed: its sender closes the connection.
 OVERFLOW = (-1, "")
+#: At most this many messages in one ``batch`` frame (its schema says so too).
+BATCH_MAX_MESSAGES = _BATCH_MAX
+#: A ``batch`` frame stops growing once its messages hold this many characters.
+BATCH_MAX_CHARS = 1_000_000
+_BATCH_HEAD = '{"type":"batch","seq":null,"messages":['
 
 
 @dataclass(eq=False)
 class Client:
-    """One connection's outbound queue of ``(seq, json_text)``."""
+    """One connection's outbound queue of ``(seq, json_text)``.
+
+    ``batch``: the client takes several messages per frame (``/ws?batch=1``).
+    """
 
     queue: asyncio.Queue[tuple[int, str]]
+    batch: bool = False
     last_sent: int = 0
     overflowed: bool = False
     send_lock: asyncio.Lock = field(default_factory=asyncio.Lock)
@@ -38,10 +61,20 @@ class Hub:
     ----------
     queue_size : int
         Messages buffered per client.
+    batch_max_messages, batch_max_chars : int
+        A ``batch`` frame's cap: messages, and characters of their texts (a single
+        longer message still goes, alone).
     """
 
-    def __init__(self, queue_size: int) -> None:
+    def __init__(
+        self,
+        queue_size: int,
+        batch_max_messages: int = BATCH_MAX_MESSAGES,
+        batch_max_chars: int = BATCH_MAX_CHARS,
+    ) -> None:
         self.queue_size = queue_size
+        self.batch_max_messages = min(batch_max_messages, BATCH_MAX_MESSAGES)
+        self.batch_max_chars = batch_max_chars
         self.clients: set[Client] = set()
         self.last_seq = 0
         self.n_dropped = 0
@@ -51,9 +84,9 @@ class Hub:
         """Remember the event loop that owns the clients."""
         self._loop = loop
 
-    def register(self) -> Client:
-        """A new client (call on the event loop)."""
-        client = Client(asyncio.Queue(self.queue_size))
+    def register(self, *, batch: bool = False) -> Client:
+        """A new client (call on the event loop); ``batch``: it opted in to batch frames."""
+        client = Client(asyncio.Queue(self.queue_size), batch=batch)
         self.clients.add(client)
         return client
 
@@ -87,3 +120,47 @@ class Hub:
         """:meth:`publish` from any thread (no-op before :meth:`bind`)."""
         if messages and self._loop is not None and not self._loop.is_closed():
             self._loop.call_soon_threadsafe(self.publish, messages)
+
+
+def batch_text(texts: list[str]) -> str:
+    """One ``batch`` message holding the encoded messages ``texts``, joined as text."""
+    return _BATCH_HEAD + ",".join(texts) + "]}"
+
+
+def take(
+    client: Client, first: tuple[int, str], max_messages: int, max_chars: int
+) -> tuple[list[tuple[int, str]], bool]:
+    """``first`` and what else ``client``'s queue holds now, up to a frame's cap.
+
+    Never waits (call on the event loop). Returns the items in queue order and whether
+    :data:`OVERFLOW` was met (it ends the list and is not part of it).
+    """
+    items = [first]
+    chars = len(first[1])
+    while len(items) < max_messages and chars < max_chars and not client.queue.empty():
+        item = client.queue.get_nowait()
+        if item == OVERFLOW:
+            return items, True
+        items.append(item)
+        chars += len(item[1])
+    return items, False
+
+
+def pack(texts: list[str], max_messages: int, max_chars: int) -> list[str]:
+    """Frames for ``texts`` in order: a lone message as is, several as one ``batch``.
+
+    A frame holds at most ``max_messages`` messages and stops growing once they hold
+    ``max_chars`` characters.
+    """
+    frames: list[str] = []
+    group: list[str] = []
+    chars = 0
+    for text in texts:
+        group.append(text)
+        chars += len(text)
+        if len(group) >= max_messages or chars >= max_chars:
+            frames.append(group[0] if len(group) == 1 else batch_text(group))
+            group, chars = [], 0
+    if group:
+        frames.append(group[0] if len(group) == 1 else batch_text(group))
+    return frames

@@ -4,7 +4,9 @@ Server -> client stream messages (``fix``, ``track_update``, ``sensor_status``,
 ``event``) carry ``seq``, a number that grows by one per stored message; a client that
 reconnects with ``/ws?since=N`` (or sends ``{"type": "resume", "since": N}``) is sent
 every stream message with ``seq > N`` first. Control messages (``hello``, ``pong``,
-``error``) are not stored and have ``seq: null``.
+``error``) are not stored and have ``seq: null``. A client that connects with
+``/ws?batch=1`` may also be sent ``batch`` messages (``seq: null``): several stream
+messages in one frame, in ``seq`` order, each as it would have come alone.
 
 Client -> server: ``ping`` and ``resume``. Anything else gets an ``error`` message and the
 connection stays up.
@@ -24,6 +26,8 @@ from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
 
 __all__ = [
     "AnyMessage",
+    "BATCH_MAX_MESSAGES",
+    "BatchMessage",
     "ClientMessage",
     "ErrorMessage",
     "EventBody",
@@ -38,6 +42,7 @@ __all__ = [
     "SCHEMA_PATH",
     "SensorStatusMessage",
     "ServerMessage",
+    "StreamMessage",
     "TrackBody",
     "TrackPointBody",
     "TrackUpdateMessage",
@@ -49,6 +54,8 @@ __all__ = [
 
 #: Where the exported schema lives, relative to the repository root.
 SCHEMA_PATH = Path("web") / "schema" / "messages.json"
+#: The most stream messages one ``batch`` message carries.
+BATCH_MAX_MESSAGES = 256
 
 
 class _Model(BaseModel):
@@ -190,6 +197,29 @@ class EventMessage(_Model):
     event: EventBody | None = Field(default=None, description="the detected event, if any")
 
 
+StreamMessage = Annotated[
+    FixMessage | TrackUpdateMessage | SensorStatusMessage | EventMessage,
+    Field(discriminator="type"),
+]
+
+
+class BatchMessage(_Model):
+    """Several stream messages in one frame (only to clients that asked: ``/ws?batch=1``).
+
+    The server sends one whenever a client's queue (or a resume's replay) holds several
+    messages, up to 256 of them or about 1 MB of text; a lone message still comes as
+    itself. A client applies ``messages`` in order, exactly as if each had come alone.
+    """
+
+    type: Literal["batch"] = "batch"
+    seq: None = None
+    messages: list[StreamMessage] = Field(
+        min_length=1,
+        max_length=BATCH_MAX_MESSAGES,
+        description="stream messages, in seq order",
+    )
+
+
 class HelloMessage(_Model):
     """First message on a connection."""
 
@@ -234,6 +264,7 @@ ServerMessage = Annotated[
     | TrackUpdateMessage
     | SensorStatusMessage
     | EventMessage
+    | BatchMessage
     | HelloMessage
     | PongMessage
     | ErrorMessage,
@@ -245,6 +276,7 @@ AnyMessage = Annotated[
     | TrackUpdateMessage
     | SensorStatusMessage
     | EventMessage
+    | BatchMessage
     | HelloMessage
     | PongMessage
     | ErrorMessage
@@ -253,7 +285,16 @@ AnyMessage = Annotated[
     Field(discriminator="type"),
 ]
 
-_SERVER_TYPES = ["fix", "track_update", "sensor_status", "event", "hello", "pong", "error"]
+_SERVER_TYPES = [
+    "fix",
+    "track_update",
+    "sensor_status",
+    "event",
+    "batch",
+    "hello",
+    "pong",
+    "error",
+]
 _CLIENT_TYPES = ["ping", "resume"]
 
 

@@ -2,7 +2,10 @@
 
 Connect with the operator token (``?token=`` or an ``Authorization`` header) and
 optionally ``?since=N`` to be sent every stored message with ``seq > N`` before the live
-ones. Messages are described in :mod:`demtrack.server.messages`.
+ones. With ``?batch=1`` the client is sent several stream messages per frame (``batch``
+messages) whenever more than one is waiting, live or replayed; without it (or with
+``batch=0``), one message per frame. Messages are described in
+:mod:`demtrack.server.messages`.
 """
 
 from __future__ import annotations
@@ -17,7 +20,7 @@ from starlette.concurrency import run_in_threadpool
 from starlette.websockets import WebSocketDisconnect
 
 from ..db import dumps_json
-from ..hub import OVERFLOW, Client
+from ..hub import OVERFLOW, Client, Hub, pack, take
 from ..messages import ErrorMessage, HelloMessage, PongMessage, ResumeMessage, client_adapter
 from ..security import token_ok
 from ..state import ConsoleState
@@ -28,10 +31,19 @@ router = APIRouter(tags=["stream"])
 log = logging.getLogger("demtrack.server")
 _PAGE = 1000
 _CLIENT = client_adapter()
+_BATCH = {"1": True, "true": True, "0": False, "false": False}
 
 
 async def _send(ws: WebSocket, text: str) -> None:
     await ws.send_text(text)
+
+
+async def _send_all(ws: WebSocket, hub: Hub, client: Client, texts: list[str]) -> None:
+    """Send encoded stream messages in order: batched for a client that opted in."""
+    if client.batch and len(texts) > 1:
+        texts = pack(texts, hub.batch_max_messages, hub.batch_max_chars)
+    for text in texts:
+        await _send(ws, text)
 
 
 async def _replay(ws: WebSocket, state: ConsoleState, client: Client, since: int) -> None:
@@ -40,24 +52,34 @@ async def _replay(ws: WebSocket, state: ConsoleState, client: Client, since: int
         after = since
         while True:
             rows = await run_in_threadpool(state.store.events_since, after, _PAGE)
-            for msg in rows:
-                await _send(ws, dumps_json(msg))
-                after = msg["seq"]
+            if rows:
+                await _send_all(ws, state.hub, client, [dumps_json(m) for m in rows])
+                after = rows[-1]["seq"]
             if len(rows) < _PAGE:
                 break
         client.last_sent = max(after, since)
 
 
-async def _sender(ws: WebSocket, client: Client) -> None:
+async def _sender(ws: WebSocket, hub: Hub, client: Client) -> None:
     while True:
-        seq, text = await client.queue.get()
-        if (seq, text) == OVERFLOW:
+        item = await client.queue.get()
+        if item == OVERFLOW:
+            overflowed = True
+            items: list[tuple[int, str]] = []
+        elif client.batch:
+            items, overflowed = take(client, item, hub.batch_max_messages, hub.batch_max_chars)
+        else:
+            items, overflowed = [item], False
+        if items:
+            async with client.send_lock:
+                # a replay may have sent some already (resume while live)
+                fresh = [text for seq, text in items if seq > client.last_sent]
+                if fresh:
+                    await _send_all(ws, hub, client, fresh)
+                    client.last_sent = items[-1][0]
+        if overflowed:
             await ws.close(code=1013, reason="client too slow; reconnect with ?since=N")
             return
-        async with client.send_lock:
-            if seq > client.last_sent:
-                await _send(ws, text)
-                client.last_sent = seq
 
 
 def _error(message: str) -> str:
@@ -114,8 +136,12 @@ async def stream(ws: WebSocket) -> None:
         except ValueError:
             await ws.close(code=1008, reason="since must be a non-negative integer")
             return
+    batch = _BATCH.get(ws.query_params.get("batch", "0").lower())
+    if batch is None:
+        await ws.close(code=1008, reason="batch must be 0 or 1")
+        return
     await ws.accept()
-    client = state.hub.register()
+    client = state.hub.register(batch=batch)
     tasks: list[asyncio.Task] = []
     try:
         last = await run_in_threadpool(state.store.last_seq)
@@ -125,7 +151,7 @@ async def stream(ws: WebSocket) -> None:
         else:
             client.last_sent = last
         tasks = [
-            asyncio.create_task(_sender(ws, client)),
+            asyncio.create_task(_sender(ws, state.hub, client)),
             asyncio.create_task(_receiver(ws, state, client)),
         ]
         done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)

@@ -3,6 +3,10 @@
 // Each stored message has a `seq`; after a drop the client reconnects with `?since=<last
 // seq seen>` and the server sends what was missed first, so nothing is lost. If the
 // server's newest seq is below ours (a fresh database), the store starts over.
+//
+// The page connects with `batch=1`: when several messages wait on the server, they come in
+// one frame, `{"type": "batch", "messages": [...]}`, and are applied one by one in order,
+// exactly as if each had come alone (one `onmessage` event per frame, not per message).
 
 import { wsURL } from "./api.mjs";
 
@@ -20,8 +24,9 @@ export class Stream {
     this.delay = MIN_DELAY_MS;
     this.closed = false;
     this.timer = null;
-    this.nReceived = 0;
+    this.nReceived = 0; // messages handed on (not frames; repeats of a seq not counted)
     this.nGaps = 0;
+    this.nFrames = 0; // WebSocket frames received
   }
 
   start(since) {
@@ -34,7 +39,7 @@ export class Stream {
     this.h.onStatus(this.lastSeq === null ? "connecting" : "reconnecting");
     let ws;
     try {
-      ws = new WebSocket(wsURL(this.lastSeq));
+      ws = new WebSocket(`${wsURL(this.lastSeq)}&batch=1`);
     } catch (err) {
       this.retry();
       return;
@@ -70,6 +75,24 @@ export class Stream {
     } catch (_) {
       return;
     }
+    this.nFrames += 1;
+    if (msg.type === "batch") {
+      for (const inner of msg.messages || []) {
+        try {
+          this.apply(inner);
+        } catch (err) {
+          // one bad message must not cost the rest of the frame; still report it
+          setTimeout(() => {
+            throw err;
+          });
+        }
+      }
+      return;
+    }
+    this.apply(msg);
+  }
+
+  apply(msg) {
     if (msg.type === "hello") {
       this.delay = MIN_DELAY_MS;
       if (this.lastSeq !== null && msg.last_seq < this.lastSeq) {
