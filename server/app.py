@@ -142,11 +142,20 @@ def _start_scene(site_: Site, settings: Settings) -> Any:
     )
 
 
-def _start_replay(site_: Site, store: Store, pipeline: Pipeline, settings: Settings) -> Replay:
+def _start_replay(
+    site_: Site, store: Store, pipeline: Pipeline, settings: Settings, after: Any = None
+) -> Replay:
+    """Start replaying ``settings.replay``; ``after`` (optional) is called before it plays.
+
+    ``after`` (``app.state.replay_after``) runs in the replay thread once the scenarios are
+    generated: ``demtrack demo`` sets it to wait for a child process compiling the
+    tracker's kernels, so no replayed detection waits for (or repeats) that compile.
+    """
     t0 = start_time_after(store.last_times())
     names = list(settings.replay)
-    replay = Replay(
-        lambda: scenario_stream(
+
+    def frames() -> Any:
+        stream = scenario_stream(
             site_,
             names,
             t0,
@@ -154,7 +163,13 @@ def _start_replay(site_: Site, store: Store, pipeline: Pipeline, settings: Setti
             copies=settings.replay_copies,
             rate_hz=settings.replay_rate_hz,
             duration_s=settings.replay_duration_s or None,
-        ),
+        )
+        if after is not None:
+            after()
+        return stream
+
+    replay = Replay(
+        frames,
         pipeline.ingest,
         speed=settings.replay_speed,
     )
@@ -193,7 +208,11 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     hub.last_seq = store.last_seq()
     log.info("replayed %(replayed)d fixes, processed %(processed)d detections", counts)
     app.state.console = ConsoleState(settings, site_, store, hub, pipeline, caster)
-    app.state.replay = _start_replay(site_, store, pipeline, settings) if settings.replay else None
+    app.state.replay = (
+        _start_replay(site_, store, pipeline, settings, getattr(app.state, "replay_after", None))
+        if settings.replay
+        else None
+    )
     try:
         yield
     finally:

@@ -10,6 +10,7 @@ page can be served. ``demtrack demo --walkthrough`` prints the older text walk-t
 from __future__ import annotations
 
 import argparse
+import functools
 import shutil
 import time
 from pathlib import Path
@@ -97,15 +98,16 @@ def _fresh_db(path: Path) -> None:
 def _live(args: argparse.Namespace) -> int:
     t_start = time.monotonic()
     live = live_overrides(args, DEMO_SCENARIOS)  # checks the options before any work
-    from demtrack.core.raycast import use_light_kernels
+    # The children start before this process imports numba (about a second).
     from demtrack.samplesite.kernel_warmup import KernelWarmers
 
     if (args.site / MANIFEST).exists():
         # The build left the light kernels in numba's cache; the fast ones may be missing
         # (a first run stopped early): the same low-priority child loads or compiles them.
+        # The tracker's kernels load in about a second (the replay waits for them).
         server_warmer = KernelWarmers.start(["tracker", "server"])
         try:
-            use_light_kernels(True)
+            _use_light_kernels()
             return _serve_demo(args, args.site, live, t_start, server_warmer)
         finally:
             server_warmer.stop()
@@ -113,17 +115,23 @@ def _live(args: argparse.Namespace) -> int:
     # Cold start: the light kernels the build and the first page need compile in a child
     # beside the scan and the server imports; a second child, at the lowest CPU priority,
     # compiles the fast kernels, and the server's warm-up waits for it before it loads
-    # them and casts switch over (core.raycast.use_light_kernels); a third compiles the
-    # live tracker's kernels.
+    # them and casts switch over (core.raycast.use_light_kernels); two more, at a low
+    # priority too, compile the live tracker's kernels, and the replay waits for them.
     warmers = KernelWarmers.start()
-    server_warmer = KernelWarmers.start(["tracker", "server"])
+    server_warmer = KernelWarmers.start(["fusion", "kalman", "server"])
     try:
-        use_light_kernels(True)
+        _use_light_kernels()
         site_dir = ensure_sample_site(args.site, warmers=_ImportServerWhileWaiting(warmers))
         return _serve_demo(args, site_dir, live, t_start, server_warmer)
     finally:
         warmers.stop()
         server_warmer.stop()
+
+
+def _use_light_kernels() -> None:
+    from demtrack.core.raycast import use_light_kernels
+
+    use_light_kernels(True)
 
 
 class _ImportServerWhileWaiting:
@@ -152,6 +160,7 @@ def _serve_demo(
     t_start: float,
     server_warmer: Any,
 ) -> int:
+    from demtrack.samplesite.kernel_warmup import TRACKER_JOBS
     from demtrack.server.app import create_app
     from demtrack.server.scene3d import display_host
 
@@ -167,6 +176,10 @@ def _serve_demo(
     app = create_app(**overrides)
     if server_warmer is not None:
         app.state.warm_after = server_warmer.wait
+        # The replay starts once the tracker's kernels are in numba's cache: on a cold
+        # start the low-priority children are still compiling them when the first
+        # page is served (the replay thread compiling them too would hold the GIL).
+        app.state.replay_after = functools.partial(server_warmer.wait, TRACKER_JOBS)
     settings = app.state.settings
     print(f"site {settings.site}, database {settings.resolved_db_path} (fresh each run)")
     print("starting the console (site, tracker, ray-casting kernels, 3D scene) ...", flush=True)

@@ -32,6 +32,7 @@ from demtrack.core.roads import RoadNetwork
 from demtrack.core.site import MANIFEST, Sensor, site_manifest
 
 from .cameras import sighting_heads
+from .kernel_warmup import load_numba_target
 from .ortho import ortho_grid, paint_orthophoto
 from .scan import coarse_dem, simulate_laser_scan
 from .world import ANCHOR, EXTENT_M, make_world
@@ -113,6 +114,9 @@ def _build(
     write_roads_geojson(out / "roads.geojson", roads, frame)
     step(f"orthophoto {grid.ncols}x{grid.nrows} at {grid.cell_m} m; {len(roads)} roads")
     if warmers is not None:
+        # Numba's first load of a kernel in a process sets up its CPU target (about 1 s
+        # of imports): done here, it overlaps the compile the build waits for.
+        load_numba_target()
         warmers.wait()  # a failed job only means the render compiles what is missing
         step("ray-casting kernels compiled (beside the steps above)")
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
@@ -156,3 +157,82 @@ def test_warmers_report_exit_status():
     assert w.wait() == [0]
     with pytest.raises(ValueError, match="unknown warm-up job"):
         KernelWarmers.start(["nope"])
+
+
+def test_wait_can_join_the_children_of_some_jobs_only():
+    class Proc:
+        def __init__(self, status: int) -> None:
+            self.status = status
+            self.waited = False
+
+        def wait(self) -> int:
+            self.waited = True
+            return self.status
+
+    tracker, server = Proc(3), Proc(0)
+    warmers = KernelWarmers([tracker, server], ["tracker", "server"])  # type: ignore[list-item]
+    assert warmers.wait(["tracker"]) == [3]
+    assert tracker.waited and not server.waited
+    assert warmers.wait() == [3, 0] and server.waited
+
+
+def test_each_job_runs_at_its_priority():
+    # The tracker's shares yield to the build (nice 15), the fast kernels to them (19).
+    warmers = KernelWarmers.start(["pyramid", "kalman", "server"])
+    try:
+        base = os.getpriority(os.PRIO_PROCESS, 0)
+        nice = [os.getpriority(os.PRIO_PROCESS, p.pid) - base for p in warmers.procs]
+        assert nice == [min(5, 19 - base), min(15, 19 - base), 19 - base]
+        assert warmers.jobs == ["pyramid", "kalman", "server"]
+        if hasattr(os, "SCHED_IDLE"):
+            assert os.sched_getscheduler(warmers.procs[2].pid) == os.SCHED_IDLE
+    finally:
+        warmers.stop()
+
+
+TRACKER_PROBE = r"""
+import json
+from numba.core.dispatcher import Dispatcher
+from demtrack.core.tracking import fusion_kernels, hypothesiser_kernels, kalman_kernels
+from demtrack.core.tracking.warm import warm_up
+from demtrack.samplesite.kernel_warmup import run_job
+
+def held():
+    out = {}
+    for mod in (fusion_kernels, hypothesiser_kernels, kalman_kernels):
+        for name, obj in vars(mod).items():
+            if isinstance(obj, Dispatcher):
+                out[f"{mod.__name__.rsplit('.', 1)[1]}.{name}"] = [str(s) for s in obj.signatures]
+    return out
+
+steps = {"start": held()}
+run_job("fusion")
+steps["fusion"] = held()
+run_job("kalman")
+steps["kalman"] = held()
+warm_up()  # what the server's warm-up and the live tracker use
+steps["warm"] = held()
+print(json.dumps(steps))
+"""
+
+
+def test_the_tracker_jobs_share_what_the_tracker_warm_up_compiles():
+    done = subprocess.run(
+        [sys.executable, "-c", TRACKER_PROBE],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=900,
+    )
+    steps = json.loads(done.stdout.strip().splitlines()[-1])
+    fusion = _added(steps["start"], steps["fusion"])
+    kalman = _added(steps["fusion"], steps["kalman"])
+    assert set(fusion) == {
+        "fusion_kernels.screen_pairs_kernel",
+        "fusion_kernels.triangulation_cov_kernel",
+    }
+    assert kalman and not set(kalman) & set(fusion)  # two shares, no kernel in both
+    assert all(
+        k.startswith("kalman_kernels.") or k.startswith("hypothesiser_kernels.") for k in kalman
+    )
+    assert _added(steps["kalman"], steps["warm"]) == {}  # nothing left to compile
