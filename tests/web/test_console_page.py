@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from typing import Any
 
 import pytest
@@ -22,6 +23,30 @@ HEADS_JS = """() => window.demtrack.map.trails.getSource().getFeatures()
 
 def heads(pg: Any) -> dict[int, tuple[float, float]]:
     return {h["id"]: tuple(h["xy"]) for h in pg.evaluate(HEADS_JS)}
+
+
+def drawn_at_shown_time(
+    pg: Any, tracks: dict[int, dict[str, Any]], timeout_s: float = 30.0
+) -> tuple[float, dict[int, tuple[float, float]]]:
+    """The shown time and the drawn heads, once the map has drawn that time.
+
+    The map redraws on an animation frame after the time or the data change, later on a
+    busy machine: poll until every head of a track in ``tracks`` that spans the shown
+    time is drawn at its interpolated position (or ``timeout_s`` passes; the caller's
+    asserts then say what differs).
+    """
+    deadline = time.monotonic() + timeout_s
+    while True:
+        t = pg.evaluate("window.demtrack.timeline.now()")
+        shown = heads(pg)
+        want = {k: interpolate(tr["points"], t) for k, tr in tracks.items()}
+        if shown and all(
+            k in shown and math.dist(shown[k], w) < 1e-6 for k, w in want.items() if w is not None
+        ):
+            return t, shown
+        if time.monotonic() > deadline:
+            return t, shown
+        pg.wait_for_timeout(100)
 
 
 def api_tracks(server: Any) -> list[dict[str, Any]]:
@@ -154,13 +179,11 @@ def test_replayed_track_appears_and_moves(page, server_factory, scenario_records
             "window.demtrack.store.tracks.size > 0 && window.demtrack.store.tMax >= 7",
             timeout=60_000,
         )
-        page.wait_for_timeout(300)
-        before = heads(page)
+        _, before = drawn_at_shown_time(page, {tr["id"]: tr for tr in api_tracks(srv)})
         assert before, "a confirmed track should be drawn"
         post_until(c, scenario_records, 8.0, 16.0)
         page.wait_for_function("window.demtrack.store.tMax >= 15", timeout=60_000)
-        page.wait_for_timeout(300)
-    after = heads(page)
+    _, after = drawn_at_shown_time(page, {tr["id"]: tr for tr in api_tracks(srv)})
     moved = [k for k in before if k in after and math.dist(before[k], after[k]) > 5.0]
     assert moved, (before, after)
     # The live head is where the API's track is at the page's time.
@@ -189,9 +212,7 @@ def test_scrubbing_moves_the_displayed_positions(page, fed_server):
     seen = []
     for frac in (0.35, 0.7):
         page.mouse.click(scrub["x"] + frac * scrub["width"], scrub["y"] + scrub["height"] / 2)
-        page.wait_for_timeout(300)
-        t = page.evaluate("window.demtrack.timeline.now()")
-        shown = heads(page)
+        t, shown = drawn_at_shown_time(page, tracks)
         spanning = {
             k: interpolate(tr["points"], t)
             for k, tr in tracks.items()

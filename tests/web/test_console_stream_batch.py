@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 from typing import Any
 
 import pytest
@@ -38,7 +39,10 @@ def test_page_applies_batched_frames_once_each_live_and_after_resume(
         post_until(c, scenario_records, -1.0, 6.0)
         seq = c.get("/api/health").json()["last_seq"]
         live = _caught_up(page, seq)
-        page.wait_for_timeout(200)  # the frame events reach Playwright by then
+        # The frame events reach Playwright after the page counted them: wait for all of them.
+        deadline = time.monotonic() + 60.0
+        while len(frames) < live["frames"] and time.monotonic() < deadline:
+            page.wait_for_timeout(50)
         # Every stored message reached the page once (it opened on an empty database),
         # counted as messages, not frames; some frames carried several.
         assert live["received"] == seq and live["gaps"] == 0
