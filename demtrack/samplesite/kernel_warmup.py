@@ -46,10 +46,11 @@ Run as ``python -m demtrack.samplesite.kernel_warmup JOB``.
 
 from __future__ import annotations
 
+import functools
 import os
 import subprocess
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -110,33 +111,17 @@ def _job_server() -> None:
     undistort_normalized_nb(np.array([0.1]), np.array([0.1]), -0.04, 0.0, 0.0, 0.0, 0.0)
 
 
-def _job_tracker() -> None:
+def _job_tracker(part: str = "all") -> None:
     from demtrack.core.tracking.warm import warm_up
 
-    warm_up()
+    warm_up(part=part)  # the whole walk, or one of its shares (core.tracking.warm.PARTS)
 
 
-def _job_kalman() -> None:
-    from demtrack.core.tracking.methods import run_tracker
-    from demtrack.core.tracking.warm import _walk
-
-    # One camera's fixes: no pair to fuse, every Kalman kernel (the same specialisations).
-    run_tracker([f for f in _walk() if f.sensor == "a"], "kalman")
-
-
-def _job_fusion() -> None:
-    from demtrack.core.tracking.methods import run_tracker
-    from demtrack.core.tracking.warm import _walk
-
-    # The first step's pair of fixes: fused, and a track started with nothing to predict.
-    run_tracker([f for f in _walk() if f.t_s == 0.0], "kalman")
-
-
-_JOB_FUNCS = {
+_JOB_FUNCS: dict[str, Callable[[], None]] = {
     "cast": _job_cast,
     "pyramid": _job_pyramid,
-    "fusion": _job_fusion,
-    "kalman": _job_kalman,
+    "fusion": functools.partial(_job_tracker, "fusion"),
+    "kalman": functools.partial(_job_tracker, "kalman"),
     "tracker": _job_tracker,
     "server": _job_server,
 }

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from test_tracking_batched import _fix
 
 from demtrack.core.tracking import fusion_kernels, hypothesiser_kernels, kalman_kernels
@@ -34,3 +35,8 @@ def test_after_warm_up_tracking_compiles_nothing():
     tracks = run_tracker(fixes, "kalman")
     assert len(tracks) == 1 and len(tracks[0].points) > 10
     assert [len(k.signatures) for k in KERNELS] == before
+
+
+def test_an_unknown_warm_up_part_is_a_one_line_error():
+    with pytest.raises(ValueError, match="unknown warm-up part 'gating'"):
+        warm_up(part="gating")
