@@ -152,15 +152,12 @@ def pack(texts: list[str], max_messages: int, max_chars: int) -> list[str]:
     A frame holds at most ``max_messages`` messages and stops growing once they hold
     ``max_chars`` characters.
     """
-    frames: list[str] = []
-    group: list[str] = []
+    groups: list[list[str]] = [[]]
     chars = 0
     for text in texts:
-        group.append(text)
+        if len(groups[-1]) >= max_messages or chars >= max_chars:
+            groups.append([])
+            chars = 0
+        groups[-1].append(text)
         chars += len(text)
-        if len(group) >= max_messages or chars >= max_chars:
-            frames.append(group[0] if len(group) == 1 else batch_text(group))
-            group, chars = [], 0
-    if group:
-        frames.append(group[0] if len(group) == 1 else batch_text(group))
-    return frames
+    return [g[0] if len(g) == 1 else batch_text(g) for g in groups if g]

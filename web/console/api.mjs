@@ -90,9 +90,11 @@ export async function imageURL(path, { signal } = {}) {
   return URL.createObjectURL(blob);
 }
 
-export function wsURL(since) {
+/** The stream's URL: resume after `since` (if any); `batch`: several messages per frame. */
+export function wsURL(since, { batch = false } = {}) {
   const proto = window.location.protocol === "https:" ? "wss:" : "ws:";
   const q = new URLSearchParams({ token: token() || "" });
   if (since !== null && since !== undefined) q.set("since", String(since));
+  if (batch) q.set("batch", "1");
   return `${proto}//${window.location.host}/ws?${q}`;
 }

@@ -39,7 +39,7 @@ export class Stream {
     this.h.onStatus(this.lastSeq === null ? "connecting" : "reconnecting");
     let ws;
     try {
-      ws = new WebSocket(`${wsURL(this.lastSeq)}&batch=1`);
+      ws = new WebSocket(wsURL(this.lastSeq, { batch: true }));
     } catch (err) {
       this.retry();
       return;
