@@ -9,12 +9,11 @@ from collections.abc import Iterator
 import numba
 import numpy as np
 import pytest
+from raycast_checks import HIT_FIELDS, assert_identical_hits
 
 from demtrack.bench.synthetic_terrain import camera_rays, incoherent_rays, synthetic_dem
 from demtrack.core import raycast as rc
 from demtrack.core.raycast import RayCaster, RayHits, light_kernels
-
-FIELDS = ("offsets", "range_m", "points", "status", "crossed_nodata", "truncated")
 
 
 @pytest.fixture(scope="module")
@@ -51,13 +50,6 @@ def unpooled_cast(dem, o, d, **kw) -> RayHits:
         rc._SCRATCH_MIN_BYTES = saved
 
 
-def assert_same(a: RayHits, b: RayHits) -> None:
-    for name in FIELDS:
-        x, y = getattr(a, name), getattr(b, name)
-        assert x.dtype == y.dtype and x.shape == y.shape, name
-        np.testing.assert_array_equal(x, y, err_msg=name)
-
-
 def poison() -> None:
     """Fill the kept buffers with garbage: stale contents must not matter."""
     for buf in rc._SCRATCH._free:
@@ -90,9 +82,9 @@ def test_reused_scratch_gives_the_fresh_answers(dem, batches, pooled, threads, l
                 for case in CASES + CASES[::-1]:
                     name, mode, max_hits = case
                     hits = caster.cast(*batches[name], mode=mode, max_hits=max_hits)
-                    assert_same(hits, expected[case])
+                    assert_identical_hits(hits, expected[case])
                     for buf in rc._SCRATCH._free:
-                        for field in FIELDS:
+                        for field in HIT_FIELDS:
                             assert not np.shares_memory(getattr(hits, field), buf)
                     poison()
             assert rc._SCRATCH._free  # the pool was used
@@ -112,7 +104,7 @@ def test_two_threads_on_one_caster_get_their_own_answers(dem, batches, pooled):
             start.wait()
             for r in range(6):
                 job = jobs[(k + r) % len(jobs)]
-                assert_same(caster.cast(*batches[job[0]], mode=job[1]), expected[job])
+                assert_identical_hits(caster.cast(*batches[job[0]], mode=job[1]), expected[job])
         except BaseException as e:  # noqa: BLE001 - reported by the main thread
             errors.append(e)
 
@@ -152,8 +144,8 @@ def test_only_casts_above_the_threshold_use_the_pool(dem, batches, monkeypatch):
     o, d = batches["camera"]
     first = caster.cast(o, d)
     assert rc._SCRATCH.nbytes >= len(o) * (rc._FIRST_PASS_HITS_RUNS + 1) * 8
-    assert_same(caster.cast(o, d), first)
+    assert_identical_hits(caster.cast(o, d), first)
     kept = list(rc._SCRATCH._free)
     small = caster.cast(*batches["small"])  # under _SCRATCH_MIN_BYTES: allocated
     assert all(x is y for x, y in zip(rc._SCRATCH._free, kept, strict=True))
-    assert_same(small, unpooled_cast(dem, *batches["small"]))
+    assert_identical_hits(small, unpooled_cast(dem, *batches["small"]))
