@@ -8,11 +8,10 @@ from __future__ import annotations
 
 import json
 import math
-import time
 from typing import Any
 
 import pytest
-from web_helpers import SHOTS, TOKEN, open_console, post_until
+from web_helpers import SHOTS, TOKEN, open_console, post_until, wait_until
 
 pytestmark = pytest.mark.timeout(600)
 
@@ -35,18 +34,19 @@ def drawn_at_shown_time(
     time is drawn at its interpolated position (or ``timeout_s`` passes; the caller's
     asserts then say what differs).
     """
-    deadline = time.monotonic() + timeout_s
-    while True:
+    last: list[Any] = []
+
+    def drawn() -> bool:
         t = pg.evaluate("window.demtrack.timeline.now()")
         shown = heads(pg)
+        last[:] = [t, shown]
         want = {k: interpolate(tr["points"], t) for k, tr in tracks.items()}
-        if shown and all(
+        return bool(shown) and all(
             k in shown and math.dist(shown[k], w) < 1e-6 for k, w in want.items() if w is not None
-        ):
-            return t, shown
-        if time.monotonic() > deadline:
-            return t, shown
-        pg.wait_for_timeout(100)
+        )
+
+    wait_until(drawn, timeout_s, 0.1, page=pg)
+    return last[0], last[1]
 
 
 def api_tracks(server: Any) -> list[dict[str, Any]]:

@@ -10,12 +10,11 @@ from __future__ import annotations
 
 import math
 import re
-import time
 from pathlib import Path
 from typing import Any
 
 import pytest
-from web_helpers import AUTH, SHOTS, Server, free_port, open_console, post_until
+from web_helpers import AUTH, SHOTS, Server, free_port, open_console, post_until, wait_until
 
 pytestmark = pytest.mark.timeout(600)
 
@@ -25,13 +24,9 @@ LIFT_M = 0.4  # the 3D scene draws tracks this far above their points
 
 def poll(fn, timeout_s: float = 60.0, every_s: float = 0.25) -> Any:
     """``fn()`` until it returns something truthy (or fail after ``timeout_s``)."""
-    deadline = time.monotonic() + timeout_s
-    while True:
-        out = fn()
-        if out:
-            return out
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(every_s)
+    out = wait_until(fn, timeout_s, every_s)
+    assert out, "timed out"
+    return out
 
 
 # ------------------------------------------------------------------- 3D follows

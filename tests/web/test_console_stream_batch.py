@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import json
-import time
 from typing import Any
 
 import pytest
-from web_helpers import AUTH, open_console, post_until
+from web_helpers import AUTH, open_console, post_until, wait_until
 
 pytestmark = pytest.mark.timeout(600)
 
@@ -40,9 +39,7 @@ def test_page_applies_batched_frames_once_each_live_and_after_resume(
         seq = c.get("/api/health").json()["last_seq"]
         live = _caught_up(page, seq)
         # The frame events reach Playwright after the page counted them: wait for all of them.
-        deadline = time.monotonic() + 60.0
-        while len(frames) < live["frames"] and time.monotonic() < deadline:
-            page.wait_for_timeout(50)
+        wait_until(lambda: len(frames) >= live["frames"], 60.0, 0.05, page=page)
         # Every stored message reached the page once (it opened on an empty database),
         # counted as messages, not frames; some frames carried several.
         assert live["received"] == seq and live["gaps"] == 0

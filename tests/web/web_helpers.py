@@ -29,6 +29,23 @@ SCENARIO = "passing-vehicles"
 LOOPBACK = {"127.0.0.1", "localhost", "::1", "[::1]"}
 
 
+def wait_until(fn: Any, timeout_s: float = 60.0, every_s: float = 0.25, page: Any = None) -> Any:
+    """``fn()`` until it returns something truthy or ``timeout_s`` passes: its last value.
+
+    With ``page``, the pause between tries is the page's ``wait_for_timeout``, so that
+    Playwright goes on dispatching the page's events meanwhile (``time.sleep`` blocks them).
+    """
+    deadline = time.monotonic() + timeout_s
+    while True:
+        out = fn()
+        if out or time.monotonic() > deadline:
+            return out
+        if page is None:
+            time.sleep(every_s)
+        else:
+            page.wait_for_timeout(1000 * every_s)
+
+
 @dataclass
 class Server:
     """A ``demtrack serve`` process."""
