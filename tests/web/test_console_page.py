@@ -236,6 +236,102 @@ def test_scrubbing_moves_the_displayed_positions(page, fed_server):
     assert page.record.errors == []
 
 
+# -------------------------------------------------------------------- trajectories
+SYNOPSIS_JS = """() => {
+  const u = window.demtrack.ui;
+  const s = u.synopsis;
+  const lines = window.demtrack.map.synopsis.getSource().getFeatures()
+    .filter((f) => !f.get('end'))
+    .map((f) => [f.get('trackId'), f.get('gap'), f.getGeometry().getCoordinates()]);
+  return {window: s ? [s.t0, s.t1] : null,
+          apiDrawn: !!s && !!u.synopsisDrawn && u.synopsisDrawn.trajs === s.trajs,
+          lines, revision: window.demtrack.map.synopsis.getRevision()};
+}"""
+
+
+def synopsis_lines(body: dict[str, Any], cls: set[str]) -> list[tuple[Any, ...]]:
+    """The API synopsis as the page should draw it: (track, gap, coordinates) per part."""
+    out = []
+    for tr in body["trajectories"]:
+        if tr["cls"] not in cls:
+            continue
+        for part in tr["parts"]:
+            if part["kind"] == "gap":
+                coords = [
+                    [part["start"]["e_m"], part["start"]["n_m"]],
+                    [part["end"]["e_m"], part["end"]["n_m"]],
+                ]
+            else:
+                coords = [[p["e_m"], p["n_m"]] for p in part["path"]]
+            if len(coords) >= 2:
+                out.append((tr["track_id"], part["kind"] == "gap", coords))
+    return sorted(out, key=repr)
+
+
+def test_trajectories_layer_draws_the_api_synopsis_and_follows_filters(page, fed_server):
+    open_console(page, fed_server)
+    state = wait_until(
+        lambda: (s := page.evaluate(SYNOPSIS_JS))["apiDrawn"] and s, 60, 0.1, page=page
+    )
+    assert state, "the page never drew the server's synopsis"
+    t0, t1 = state["window"]
+    span = t1 - t0
+    with fed_server.client() as c:
+        body = c.get(
+            "/api/synopsis", params={"t0": t0, "t1": t1, "step_s": max(0.5, span / 1500)}
+        ).json()
+    want = synopsis_lines(body, {"vehicle", "human"})
+    assert want, "the scenario gave no trajectory in the window"
+
+    def drawn() -> list[tuple[Any, ...]]:
+        return sorted((tuple(x) for x in page.evaluate(SYNOPSIS_JS)["lines"]), key=repr)
+
+    assert drawn() == want
+    # Nothing changed, nothing rebuilt: the same features stay in the layer frame after frame.
+    kept = page.evaluate(
+        """async () => {
+            const d = window.demtrack;
+            const kept = d.map.synopsis.getSource().getFeatures()[0];
+            for (let k = 0; k < 10; k += 1) {  // ten redraws
+              d.ui.dirty = true;
+              await new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r)));
+            }
+            return d.map.synopsis.getSource().hasFeature(kept);
+        }"""
+    )
+    assert kept, "the trajectories were rebuilt although nothing changed"
+    page.screenshot(path=str(SHOTS / "trajectories.png"))
+    # A class filter rebuilds the layer without that class, and back.
+    without_vehicles = synopsis_lines(body, {"human"})
+    assert without_vehicles != want, "need vehicles in the window"
+    box = page.locator('#filter-class input[data-class="vehicle"]')
+    box.uncheck()
+    wait_until(lambda: drawn() == without_vehicles, 10, 0.1, page=page)
+    assert drawn() == without_vehicles
+    box.check()
+    wait_until(lambda: drawn() == want, 10, 0.1, page=page)
+    assert drawn() == want
+    # Selecting a track restyles the layer (its features stay): highlighted in its colour.
+    before = page.evaluate(SYNOPSIS_JS)["revision"]
+    tid = want[0][0]
+    page.locator(f'#track-list div[data-track="{tid}"]').click()
+    style = page.evaluate(
+        """async (tid) => {
+            const { SELECTED_COLOUR } = await import('/console/util.mjs');
+            const m = window.demtrack.map;
+            const f = m.synopsis.getSource().getFeatures()
+              .find((x) => x.get('trackId') === tid && !x.get('end'));
+            const styles = m.synopsisStyle(f);
+            return {colour: styles[styles.length - 1].getStroke().getColor(),
+                    selected: SELECTED_COLOUR, revision: m.synopsis.getRevision()};
+        }""",
+        tid,
+    )
+    assert style["colour"] == style["selected"]
+    assert style["revision"] > before
+    assert page.record.errors == []
+
+
 # -------------------------------------------------------------------------- export
 def test_export_downloads_valid_geojson(page, fed_server):
     open_console(page, fed_server)

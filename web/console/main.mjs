@@ -31,6 +31,7 @@ const ui = {
   rule: "first",
   markers: [],
   filters: { classes: new Set(["vehicle", "human"]), sensors: null, ids: null },
+  filterVersion: 0, // bumped on every filter change (what the drawn synopsis was filtered by)
   dirty: true,
   lastVersion: -1,
   lastT: null,
@@ -243,7 +244,7 @@ function frame(nowMs) {
 
 function redraw(t) {
   const map = ui.map;
-  map.selectedId = ui.selectedId;
+  map.setSelected(ui.selectedId);
   const tracks = trackList();
   map.drawTracks(tracks, t, visible);
   drawSynopsis(t);
@@ -266,7 +267,6 @@ function redraw(t) {
     if (p) map.centreOn(p.e_m, p.n_m);
   }
   map.trails.changed();
-  map.synopsis.changed();
   $("#counts").textContent = `${store.tracks.size} tracks · ${store.nPoints()} points`;
 }
 
@@ -287,12 +287,24 @@ function clipTrack(tr, a, b) {
 }
 
 let localCache = null;
+/** How often (ms) the page's own synopsis follows a sliding window or new data. */
+const LOCAL_SYNOPSIS_REFRESH_MS = 1000;
 
-/** The page's own synopsis; recomputed at most 4 times a second while data streams in. */
+/**
+ * The page's own synopsis of the window [a, b].
+ *
+ * Recomputed when the window's length changes, it jumps (a seek), or, while it slides
+ * (live, or playing) or data streams in, once a second: the trajectories of a window of
+ * minutes barely change between frames, and the live trails show the newest seconds.
+ */
 function localSynopsis(a, b) {
   const now = performance.now();
   const c = localCache;
-  if (c && c.a === a && c.b === b && (c.version === store.version || now - c.at < 250)) return c.trajs;
+  if (c && c.a === a && c.b === b && c.version === store.version) return c.trajs;
+  const span = b - a;
+  const sameSpan = c && (c.b - c.a === span || (!Number.isFinite(span) && !Number.isFinite(c.b - c.a)));
+  const slide = c ? Math.abs(b - c.b) : Infinity;
+  if (sameSpan && now - c.at < LOCAL_SYNOPSIS_REFRESH_MS && slide <= Math.max(30, 0.05 * span)) return c.trajs;
   const trajs = computeLocalSynopsis(a, b);
   localCache = { a, b, version: store.version, at: now, trajs };
   return trajs;
@@ -359,7 +371,13 @@ function drawSynopsis(t) {
       ui.dirty = true;
     });
   }
-  ui.map.drawSynopsis(ui.synopsisApi !== null && close ? s.trajs : localSynopsis(a, b), visible);
+  const trajs = ui.synopsisApi !== null && close ? s.trajs : localSynopsis(a, b);
+  // The layer's features are rebuilt only when what they show changed.
+  const drawn = ui.synopsisDrawn;
+  if (!drawn || drawn.trajs !== trajs || drawn.filters !== ui.filterVersion) {
+    ui.map.drawSynopsis(trajs, visible);
+    ui.synopsisDrawn = { trajs, filters: ui.filterVersion };
+  }
 }
 
 // ------------------------------------------------------------------------- events
@@ -443,7 +461,7 @@ function select(id) {
   ui.geo = null;
   for (const p of ui.cams.values()) p.click = null;
   ui.map.drawGeolocation(null);
-  ui.map.selectedId = id;
+  ui.map.setSelected(id);
   lastDetailDraw = 0;
   ui.dirty = true;
   renderDetail();
@@ -633,6 +651,7 @@ function buildFilters() {
     box.addEventListener("change", () => {
       if (box.checked) ui.filters.classes.add(c);
       else ui.filters.classes.delete(c);
+      ui.filterVersion += 1;
       ui.dirty = true;
       drawLists(timeline.now());
     });
@@ -646,6 +665,7 @@ function buildFilters() {
       if (box.checked) chosen.add(s.id);
       else chosen.delete(s.id);
       ui.filters.sensors = chosen.size === ui.sensors.length ? null : new Set(chosen);
+      ui.filterVersion += 1;
       ui.dirty = true;
       drawLists(timeline.now());
     });
@@ -654,6 +674,7 @@ function buildFilters() {
   $("#filter-track").addEventListener("input", (ev) => {
     const ids = ev.target.value.split(/[\s,;]+/).filter(Boolean).map(Number).filter(Number.isInteger);
     ui.filters.ids = ids.length ? new Set(ids) : null;
+    ui.filterVersion += 1;
     ui.dirty = true;
     drawLists(timeline.now());
   });

@@ -48,8 +48,8 @@ function label(text, color = "#fff", offsetY = -14, font = "bold 12px system-ui,
   });
 }
 
-function vectorLayer(name, title, zIndex, style, extra = {}) {
-  const layer = new ol.layer.Vector({ source: new ol.source.Vector(), style, zIndex, ...extra });
+function vectorLayer(name, title, zIndex, style, extra = {}, Layer = ol.layer.Vector) {
+  const layer = new Layer({ source: new ol.source.Vector(), style, zIndex, ...extra });
   layer.set("name", name);
   layer.set("title", title);
   return layer;
@@ -86,7 +86,10 @@ export class SiteMap {
 
     this.coverage = vectorLayer("coverage", "Camera footprints", 2, (f) => this.coverageStyle(f));
     this.roads = vectorLayer("roads", "Roads", 3, (f, res) => this.roadStyle(f, res));
-    this.synopsis = vectorLayer("synopsis", "Trajectories (window)", 4, (f) => this.synopsisStyle(f));
+    // Hundreds of long trajectories that change about once a second: drawn into an image
+    // when they (or the view) change, not replayed onto the canvas every frame.
+    this.synopsis = vectorLayer("synopsis", "Trajectories (window)", 4, (f) => this.synopsisStyle(f),
+      { imageRatio: 1 }, ol.layer.VectorImage);
     this.trails = vectorLayer("tracks", "Live tracks", 6, (f) => this.trackStyle(f), {
       updateWhileAnimating: true,
       updateWhileInteracting: true,
@@ -163,6 +166,14 @@ export class SiteMap {
   }
 
   // ------------------------------------------------------------------ dynamic layers
+  /** Highlight track `id` (or none) on the track layers; restyles them only on a change. */
+  setSelected(id) {
+    if (id === this.selectedId) return;
+    this.selectedId = id;
+    this.synopsis.changed();
+    this.trails.changed();
+  }
+
   /** Tracks at time `t`: current position, a trail behind it, id label. */
   drawTracks(tracks, t, visible) {
     const src = this.trails.getSource();
