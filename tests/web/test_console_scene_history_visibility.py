@@ -197,7 +197,10 @@ def test_scrubbing_far_back_shows_the_stored_boxes_of_that_time(page, fed_server
                  return p.covers({t}, {WINDOW_S}) && !p.inFlight
                    && window.demtrack.timeline.now() === {t}; }}"""
         )
-        page.wait_for_timeout(150)  # a frame to draw
+        # the page's next animation frame draws that state (its frame handler runs first)
+        page.evaluate(
+            "() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r)))"
+        )
         panels = page.evaluate(
             """() => [...window.demtrack.ui.cams.entries()].map(([sid, p]) => ({
                  sid, boxes: p.root.dataset.boxes, drawn: p.drawn,
