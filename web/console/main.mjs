@@ -287,15 +287,17 @@ function clipTrack(tr, a, b) {
 }
 
 let localCache = null;
-/** How often (ms) the page's own synopsis follows a sliding window or new data. */
-const LOCAL_SYNOPSIS_REFRESH_MS = 1000;
+/** How often (ms) the page's own synopsis follows a sliding window or new data: once a
+ * second, or less often when drawing it takes more than 5 % of that (at most every 5 s). */
+const LOCAL_SYNOPSIS_REFRESH_MS = [1000, 5000];
 
 /**
  * The page's own synopsis of the window [a, b].
  *
  * Recomputed when the window's length changes, it jumps (a seek), or, while it slides
- * (live, or playing) or data streams in, once a second: the trajectories of a window of
- * minutes barely change between frames, and the live trails show the newest seconds.
+ * (live, or playing) or data streams in, every LOCAL_SYNOPSIS_REFRESH_MS: the trajectories
+ * of a window of minutes barely change between frames, and the live trails show the
+ * newest seconds.
  */
 function localSynopsis(a, b) {
   const now = performance.now();
@@ -304,7 +306,9 @@ function localSynopsis(a, b) {
   const span = b - a;
   const sameSpan = c && (c.b - c.a === span || (!Number.isFinite(span) && !Number.isFinite(c.b - c.a)));
   const slide = c ? Math.abs(b - c.b) : Infinity;
-  if (sameSpan && now - c.at < LOCAL_SYNOPSIS_REFRESH_MS && slide <= Math.max(30, 0.05 * span)) return c.trajs;
+  const [least, most] = LOCAL_SYNOPSIS_REFRESH_MS;
+  const every = Math.min(most, Math.max(least, 20 * ui.map.synopsisRenderMs));
+  if (sameSpan && now - c.at < every && slide <= Math.max(30, 0.05 * span)) return c.trajs;
   const trajs = computeLocalSynopsis(a, b);
   localCache = { a, b, version: store.version, at: now, trajs };
   return trajs;

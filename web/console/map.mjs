@@ -117,6 +117,21 @@ export class SiteMap {
         .extend([new ol.control.ScaleLine({ units: "metric", bar: true, steps: 4, text: true, minWidth: 100 }), northArrow()]),
     });
     this.view.fit([b[0], b[1], b[2], b[3]], { padding: [10, 10, 10, 10] });
+
+    // What drawing the trajectories' image costs (ms): the map's render after a rebuild of
+    // its features (that render draws the image anew). The page refreshes it less often
+    // when it is dear.
+    this.synopsisRenderMs = 0;
+    this.synopsisRebuilt = false;
+    let since = null;
+    this.map.on("precompose", () => {
+      if (this.synopsisRebuilt) since = performance.now();
+      this.synopsisRebuilt = false;
+    });
+    this.map.on("postcompose", () => {
+      if (since !== null) this.synopsisRenderMs = performance.now() - since;
+      since = null;
+    });
   }
 
   /** The layers the layer list shows (those with a title, other modules' too), top first. */
@@ -222,6 +237,7 @@ export class SiteMap {
   drawSynopsis(trajs, visible) {
     const src = this.synopsis.getSource();
     src.clear(true);
+    this.synopsisRebuilt = true;
     const feats = [];
     for (const tr of trajs) {
       if (!visible(tr) || !tr.parts.length) continue;
