@@ -206,7 +206,8 @@ def build_fixes(
         np.array([extent_var.get(c, (0.0, 0.0))[k] for c in cls], dtype=np.float64) for k in (0, 1)
     )
     d = batch.directions_enu
-    ground = np.column_stack([d[:, 0], d[:, 1], np.zeros(len(d))])
+    ground = d.copy()  # the ground tracks: (dx, dy, 0)
+    ground[:, 2] = 0.0
     norm = np.linalg.norm(ground, axis=1)
     ray = np.repeat(np.arange(len(d)), n_hits)
     shift, cov = _centre_shift(ground, norm, offset, ray, batch.cov_en_m2, var_along, var_across)

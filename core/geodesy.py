@@ -227,6 +227,27 @@ def _broadcast(*arrays: np.ndarray) -> tuple[tuple[int, ...], list[np.ndarray]]:
     return shape, [np.broadcast_to(a, shape).ravel() for a in arrays]
 
 
+def _same_length_enu(e: Any, n: Any, u: Any) -> np.ndarray | None:
+    """``np.stack([e, n, u])`` when all three are finite 1-D float64 arrays of one length.
+
+    The usual call (columns of an ``(n, 3)`` array) in one copy and one finiteness check,
+    instead of three conversions, three checks and three broadcasts; the same values.
+    None for anything else: the general path converts, broadcasts and names the problem.
+    """
+    if not (
+        type(e) is np.ndarray
+        and type(n) is np.ndarray
+        and type(u) is np.ndarray
+        and e.dtype == n.dtype == u.dtype == np.float64
+        and e.ndim == n.ndim == u.ndim == 1
+        and len(e) == len(n) == len(u)
+    ):
+        return None
+    enu = np.empty((3, len(e)))
+    enu[0], enu[1], enu[2] = e, n, u
+    return enu if np.isfinite(enu).all() else None
+
+
 def _out(shape: tuple[int, ...], *arrays: np.ndarray) -> tuple[Any, ...]:
     # Scalars in, numpy float64 scalars out; arrays keep the broadcast shape.
     if shape == ():
@@ -322,8 +343,13 @@ class LocalFrame:
         Longitudes come back in [-180, 180]; on the polar axis the longitude is 0.
         Broadcasts its arguments; scalars give scalars.
         """
-        shape, (e, n, u) = _broadcast(_finite("e", e_m), _finite("n", n_m), _finite("u", u_m))
-        xyz = self.R_enu_ecef.T @ np.stack([e, n, u]) + self.origin_ecef[:, None]
+        enu = _same_length_enu(e_m, n_m, u_m)
+        if enu is None:  # the general path: broadcasting, and the checks that name a bad value
+            shape, (e, n, u) = _broadcast(_finite("e", e_m), _finite("n", n_m), _finite("u", u_m))
+            enu = np.stack([e, n, u])
+        else:
+            shape = enu.shape[1:]
+        xyz = self.R_enu_ecef.T @ enu + self.origin_ecef[:, None]
         lon, lat, _ = cached_transformer(_ECEF, _GEOG3D).transform(xyz[0], xyz[1], xyz[2])
         lat = np.asarray(lat)
         # PROJ's height is good to ~3e-7 m near the surface but switches formula poleward

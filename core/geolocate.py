@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any, Literal
 
 import numpy as np
@@ -156,6 +157,9 @@ class HitBatch:
         Its range (m) and sigma (m); NaN where none.
     road_cov_en_m2 : ndarray, shape (n, 2, 2)
         Its covariance (m^2); NaN where none.
+
+    The sigmas are worked out from the covariances on first use (the fix builder, the
+    batch path, needs none of them).
     """
 
     origins_enu: np.ndarray
@@ -165,12 +169,24 @@ class HitBatch:
     offsets: np.ndarray
     points_enu: np.ndarray
     range_m: np.ndarray
-    sigma_m: np.ndarray
     cov_en_m2: np.ndarray
     road_enu: np.ndarray
     road_range_m: np.ndarray
-    road_sigma_m: np.ndarray
     road_cov_en_m2: np.ndarray
+
+    # cached_property writes the instance __dict__ directly, so it works on frozen classes.
+    @cached_property
+    def sigma_m(self) -> np.ndarray:
+        """1-sigma worst-direction horizontal error of each terrain hit (m), shape (m,)."""
+        return _worst_sigma(self.cov_en_m2)
+
+    @cached_property
+    def road_sigma_m(self) -> np.ndarray:
+        """The road-rule point's sigma (m) per ray, shape (n,); NaN where none."""
+        out = np.full(len(self.road_range_m), np.nan)
+        rays = np.flatnonzero(self.has_road)
+        out[rays] = _worst_sigma(self.road_cov_en_m2[rays])
+        return out
 
     @property
     def n_rays(self) -> int:
@@ -399,17 +415,14 @@ class Geolocator:
         cov = hit_covariances(
             d[ray_all], rng_all, grad, axes[ray_all], sig[ray_all], np.sqrt(np.maximum(var_z, 0))
         )
-        sigma = np.sqrt(np.linalg.eigvalsh(cov)[:, -1]) if len(cov) else np.zeros(0)
         m = len(result.range_m)
-        road_all = np.empty(n * 9)  # one buffer: point (3), range, sigma, covariance (4)
+        road_all = np.empty(n * 8)  # one buffer: point (3), range, covariance (4)
         road_all.fill(np.nan)
         road_enu = road_all[: 3 * n].reshape(n, 3)
         road_range = road_all[3 * n : 4 * n]
-        road_sigma = road_all[4 * n : 5 * n]
-        road_cov = road_all[5 * n :].reshape(n, 2, 2)
+        road_cov = road_all[4 * n :].reshape(n, 2, 2)
         road_enu[road_rays] = road_p
         road_range[road_rays] = road_rng
-        road_sigma[road_rays] = sigma[m:]
         road_cov[road_rays] = cov[m:]
         return HitBatch(
             origins_enu=o,
@@ -419,11 +432,9 @@ class Geolocator:
             offsets=np.asarray(result.offsets),
             points_enu=np.asarray(result.points),
             range_m=np.asarray(result.range_m),
-            sigma_m=sigma[:m],
             cov_en_m2=cov[:m],
             road_enu=road_enu,
             road_range_m=road_range,
-            road_sigma_m=road_sigma,
             road_cov_en_m2=road_cov,
         )
 
@@ -492,6 +503,15 @@ def _pixels(camera, u: Any, v: Any) -> tuple[np.ndarray, np.ndarray]:
     return u_arr, v_arr
 
 
+def _worst_sigma(cov: np.ndarray) -> np.ndarray:
+    """Square root of the largest eigenvalue of each 2x2 covariance ``(k, 2, 2)``: (k,).
+
+    LAPACK takes the matrices one by one, so each value is the same whatever else is
+    in the call.
+    """
+    return np.sqrt(np.linalg.eigvalsh(cov)[:, -1]) if len(cov) else np.zeros(0)
+
+
 def _finite_or_zero(a: np.ndarray) -> np.ndarray:
     """``np.nan_to_num(a)``, without its work when every value is finite already."""
     return a if np.isfinite(a).all() else np.nan_to_num(a)
@@ -507,7 +527,8 @@ def _rays_and_perturbations(
     """
     intr = camera.intrinsics
     xn, yn = intr.undistort(u, v)
-    ray = np.stack([xn, yn, np.ones_like(xn)], axis=-1)
+    ray = np.empty((len(xn), 3))  # np.stack([xn, yn, 1], axis=-1) in one allocation
+    ray[:, 0], ray[:, 1], ray[:, 2] = xn, yn, 1.0
     norm = np.linalg.norm(ray, axis=-1, keepdims=True)
     unit = ray / norm
     rot_t = camera.R_world_cam.T

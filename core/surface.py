@@ -36,7 +36,15 @@ def bilinear_sample(values: np.ndarray, gx: ArrayLike, gy: ArrayLike) -> np.ndar
         surrounding centres is NaN.
     """
     values = np.asarray(values)
-    gx, gy = np.broadcast_arrays(np.asarray(gx, dtype=np.float64), np.asarray(gy, dtype=np.float64))
+    if not (
+        type(gx) is np.ndarray
+        and type(gy) is np.ndarray
+        and gx.dtype == gy.dtype == np.float64
+        and gx.shape == gy.shape
+    ):  # float64 arrays of one shape (the usual call) are already what this makes
+        gx, gy = np.broadcast_arrays(
+            np.asarray(gx, dtype=np.float64), np.asarray(gy, dtype=np.float64)
+        )
     if gx.size > KERNEL_MAX_POINTS:
         return bilinear_sample_reference(values, gx, gy)
     from .surface_kernels import bilinear_kernel  # numba loads on first use

@@ -437,16 +437,16 @@ class Store:
                         out.append(StoredBatch(row[0], known, loads_json(row[1]), duplicate=True))
                         continue
                 detections, report = make()
-                cur = c.execute(
+                # One statement gives the batch's id and the detections' highest id.
+                ((batch_id, last_id),) = c.execute(
                     "INSERT INTO batches (batch_key, n_records, n_accepted, report)"
-                    " VALUES (?,?,?,?)",
+                    " VALUES (?,?,?,?) RETURNING id, (SELECT MAX(id) FROM detections)",
                     (batch_key, report["n_records"], report["accepted"], dumps_json(report)),
-                )
-                batch_id = int(cur.lastrowid or 0)
+                ).fetchall()
                 # Ids are given explicitly (the next ones, in record order: the write lock
                 # and BEGIN IMMEDIATE make this the only writer) so one executemany inserts
                 # them.
-                first = _next_id(c, "SELECT MAX(id) FROM detections")
+                first = 1 if last_id is None else int(last_id) + 1
                 ids = tuple(range(first, first + len(detections)))
                 c.executemany(
                     "INSERT INTO detections (id, batch_id, t_s, sensor, u_min, v_min, u_max,"
@@ -575,9 +575,11 @@ class Store:
                 )
             rows = [(kind, dumps_json(payload)) for kind, payload in events]
             # AUTOINCREMENT: a sequence number is never reused, even after deletes.
-            first = max(
-                _next_id(c, "SELECT MAX(seq) FROM events"),
-                _next_id(c, "SELECT seq FROM sqlite_sequence WHERE name = 'events'"),
+            # The larger of the two, in one statement (both are at least 0).
+            first = _next_id(
+                c,
+                "SELECT MAX(COALESCE((SELECT MAX(seq) FROM events), 0),"
+                " COALESCE((SELECT seq FROM sqlite_sequence WHERE name = 'events'), 0))",
             )
             seqs = list(range(first, first + len(rows)))
             c.executemany(

@@ -163,7 +163,8 @@ def _stored_fix(det_id: int, d: Detection, fix: Fix) -> Fix:
     direction is normalised again, as the constructor does.
     """
     direction = np.array(fix.direction_enu, dtype=np.float64)
-    direction /= float(np.linalg.norm(direction))
+    # np.linalg.norm of a 1-D float array is sqrt(x.dot(x)): the same bits, one call
+    direction /= math.sqrt(direction.dot(direction))
     direction.setflags(write=False)
     return Fix._trusted(
         d.t_s,
@@ -393,11 +394,16 @@ class Pipeline:
 
         Time order is checked across batches too: one valid seed record per sensor at its
         latest stored time goes first, so the reader's own ``time_backwards`` rule sees it.
+        Only the batch's own sensors need one (the reader keeps its time order per sensor,
+        and a seed is never skipped), so a camera's small batch checks no others' seeds.
         """
+        named = {
+            r["sensor"] for r in records if isinstance(r, dict) and isinstance(r.get("sensor"), str)
+        }
         seeds = [
             {"t": t, "sensor": s, "bbox": [0, 0, 0, 0], "class": "human"}
             for s, t in sorted(self._last_t.items())
-            if s in self.sizes
+            if s in named and s in self.sizes
         ]
         dets, report = read_detection_records(
             [*seeds, *records], sensors=self.sizes, max_examples=_MAX_ISSUES
@@ -561,7 +567,10 @@ class Pipeline:
         """
         dets = [d for _, d in pending]
         fixes, _ = build_fixes(self.site, dets)
-        bodies = self._fix_bodies(pending, fixes)
+        # The bodies' geodetic fields are filled by the track points' conversion below:
+        # one pyproj round trip per batch, not two.
+        unfilled: list[tuple[np.ndarray, list[dict[str, Any]]]] = []
+        bodies = self._fix_bodies(pending, fixes, unfilled)
         fixed = {det_id for (det_id, _), body in zip(pending, bodies, strict=True) if body}
         rows: list[tuple[int, float, str, str, str, dict[str, Any]]] = []
         events: list[tuple[str, dict[str, Any]]] = []
@@ -584,7 +593,9 @@ class Pipeline:
         if ended_ids:  # rare: read the ended tracks' final form once
             recent = self.tracker.tracks(ended_after_s=self._sent_since(ended_ids))
             changed = [t for t in recent if t.id in ended_ids] + live_now
-        track_rows, track_events = self._track_changes(changed, live_ids=live_ids)
+        track_rows, track_events = self._track_changes(
+            changed, live_ids=live_ids, also_geodetic=unfilled
+        )
         events += track_events
         activity = [p["event"] for kind, p in track_events if kind == "event"]
         if self.live_events is not None and math.isfinite(self._released_t):
@@ -640,19 +651,30 @@ class Pipeline:
         return min(ends) if len(ends) == len(ids) else -math.inf
 
     def _fix_bodies(
-        self, pending: list[tuple[int, Detection]], fixes: list[Fix]
+        self,
+        pending: list[tuple[int, Detection]],
+        fixes: list[Fix],
+        unfilled: list[tuple[np.ndarray, list[dict[str, Any]]]] | None = None,
     ) -> list[dict[str, Any] | None]:
-        """The stored body of each detection's fix (None: no fix); one geodetic call."""
+        """The stored body of each detection's fix (None: no fix); one geodetic call.
+
+        ``unfilled``: make no geodetic call; the hits' ``lat_deg``, ``lon_deg`` and
+        ``h_m`` are left None (in their places) and ``(points (k, 3), hit dicts)`` is
+        appended to it for :meth:`_refresh_points` to fill, before the bodies are used.
+        """
         by_index = {f.detection_index: f for f in fixes}
         chunks = []
         for f in fixes:
             chunks.append(f.hits_enu)
             if f.road_hit_enu is not None:
                 chunks.append(f.road_hit_enu[None, :])
-        if chunks:
+        if chunks and unfilled is None:
             pts = np.vstack(chunks)
             lat, lon, h = (np.atleast_1d(a) for a in self.site.frame.to_geodetic(*pts.T))
             geo = np.column_stack([lat, lon, h]).tolist()
+        else:
+            geo = [[None, None, None]] * sum(len(c) for c in chunks)
+        dicts: list[dict[str, Any]] = []
         k = 0
         out: list[dict[str, Any] | None] = []
         for i, (det_id, d) in enumerate(pending):
@@ -667,10 +689,12 @@ class Pipeline:
             ):
                 hits.append(_hit(p, sigma, geo[k], cov))
                 k += 1
+            dicts += hits
             road = None
             if fix.road_hit_enu is not None:
                 sigma = float(np.min(fix.hit_sigma_m)) if len(fix.hit_sigma_m) else 1.0
                 road = _hit(fix.road_hit_enu.tolist(), sigma, geo[k])
+                dicts.append(road)
                 k += 1
             u0, _, u1, v1 = d.bbox
             self._queued_fixes[det_id] = _stored_fix(det_id, d, fix)
@@ -690,15 +714,25 @@ class Pipeline:
                     "tracked": True,
                 }
             )
+        if unfilled is not None and chunks:
+            unfilled.append((np.vstack(chunks), dicts))
         return out
 
     # ------------------------------------------------------------------ tracks
-    def _refresh_points(self, tracks: Sequence[Track]) -> None:
+    def _refresh_points(
+        self,
+        tracks: Sequence[Track],
+        also_geodetic: Sequence[tuple[np.ndarray, list[dict[str, Any]]]] = (),
+    ) -> None:
         """Bring the cached JSON points of ``tracks`` up to date.
 
         Only points that changed since the last call are converted and encoded (a track
         changes at its end), and the new points of all ``tracks`` go through one geodetic
         conversion: per call, not per track (each costs a pyproj round trip).
+        ``also_geodetic``: ``(points (k, 3), dicts)`` pairs whose dicts get the points'
+        ``lat_deg``, ``lon_deg`` and ``h_m`` from that same conversion (the batch's fix
+        hits; PROJ converts each point on its own, so the values are those of a call of
+        their own).
         """
         todo = []
         for track in tracks:
@@ -720,14 +754,21 @@ class Pipeline:
                 pts, js = [], []
             todo.append((track, same, pts, js))
             self._dirty_from[track.id] = min(same, self._dirty_from.get(track.id, same))
-        if not todo:
+        if not todo and not also_geodetic:
             return
-        q = np.concatenate([t.p_enu[same:] for t, same, _, _ in todo])
+        parts = [t.p_enu[same:] for t, same, _, _ in todo]
+        n_track = sum(len(a) for a in parts)
+        q = np.concatenate(parts + [a for a, _ in also_geodetic])
         lat, lon, h = (
             np.atleast_1d(a).tolist()
             for a in self.site.frame.to_geodetic(q[:, 0], q[:, 1], q[:, 2])
         )
-        rows = q.tolist()
+        k = n_track
+        for _, dicts in also_geodetic:
+            for d in dicts:
+                d["lat_deg"], d["lon_deg"], d["h_m"] = lat[k], lon[k], h[k]
+                k += 1
+        rows = q[:n_track].tolist()
         k = 0
         for track, same, pts, js in todo:
             for tp in track.points[same:]:
@@ -769,11 +810,16 @@ class Pipeline:
         }
 
     def _track_changes(
-        self, tracks: Sequence[Track], force: bool = False, live_ids: set[int] | None = None
+        self,
+        tracks: Sequence[Track],
+        force: bool = False,
+        live_ids: set[int] | None = None,
+        also_geodetic: Sequence[tuple[np.ndarray, list[dict[str, Any]]]] = (),
     ) -> tuple[list[dict[str, Any]], list[tuple[str, dict[str, Any]]]]:
         """Of ``tracks``, those that changed since the last call: table rows and messages.
 
         ``live_ids``: the ids of the tracker's live tracks, when the caller has them.
+        ``also_geodetic``: passed to :meth:`_refresh_points` (one conversion for both).
         """
         if live_ids is None:
             live_ids = {t.id for t in self.tracker.tracks(include_ended=False)}
@@ -792,7 +838,7 @@ class Pipeline:
                 continue
             self._seen[track.id] = sig
             changed.append((track, live, p, prev))
-        self._refresh_points([t for t, _, _, _ in changed])
+        self._refresh_points([t for t, _, _, _ in changed], also_geodetic)
         for track, live, p, prev in changed:
             full = self.track_body(track, live)
             start = 0 if force else self._dirty_from.get(track.id, len(track.points))
