@@ -306,7 +306,7 @@ def _soak(args: argparse.Namespace, site: Path, tmp: Path) -> tuple[list[Sample]
                 )
                 print(_row(samples[-1]), flush=True)
                 prev = cur
-                if t_rel >= args.duration - 1.0 or wall >= max_wall:
+                if t_rel >= args.duration - 1.0 or wall >= max_wall or _replay_ended(samples):
                     break
                 time.sleep(max(0.0, args.every - (time.monotonic() - w0 - wall)))
             final = {**page_state(page), "errors": errors[:20], "n_errors": len(errors)}
@@ -318,6 +318,21 @@ def _soak(args: argparse.Namespace, site: Path, tmp: Path) -> tuple[list[Sample]
     finally:
         server.stop()
     return samples, final
+
+
+def _replay_ended(samples: list[Sample], quiet: int = 2) -> bool:
+    """True once no detection arrived for ``quiet`` samples: the replay is over.
+
+    Its scenario time starts before the page's first data, so ``t_s`` stops short of
+    ``--duration``; the idle samples are dropped, so they do not dilute the pace and the
+    averages.
+    """
+    if len(samples) <= quiet or samples[-1].detections == 0:
+        return False
+    if any(s.detections != samples[-1].detections for s in samples[-quiet - 1 :]):
+        return False
+    del samples[len(samples) - quiet :]
+    return True
 
 
 _HEAD = (
