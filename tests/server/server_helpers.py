@@ -50,3 +50,23 @@ def walk(
             }
         )
     return out
+
+
+def vehicle_run_pipeline(site_dir: Path, tmp: Path, until_s: float):
+    """A started kalman ``Pipeline`` on a fresh store, and the ``vehicle-run`` scenario's
+    detection records before ``until_s`` (not yet ingested): ``(site, pipeline, records)``.
+    """
+    from demtrack.core.site import load_site
+    from demtrack.samplesite.scenarios import make_scenario
+    from demtrack.server.db import Store
+    from demtrack.server.pipeline import Pipeline
+
+    site = load_site(site_dir)
+    records = [
+        {"t": d.t_s, "sensor": d.sensor, "bbox": list(d.bbox), "class": d.cls, "score": 0.5}
+        for d in make_scenario(site, "vehicle-run").detections
+        if d.t_s < until_s
+    ]
+    p = Pipeline(site, Store(tmp / "f.sqlite3"), "kalman", lambda _m: None)
+    p.start()
+    return site, p, records

@@ -9,23 +9,13 @@ from __future__ import annotations
 import json
 
 import numpy as np
+from server_helpers import vehicle_run_pipeline
 
 from demtrack.core.fix_builder import build_fixes
-from demtrack.core.site import load_site
-from demtrack.samplesite.scenarios import make_scenario
-from demtrack.server.db import Store
-from demtrack.server.pipeline import Pipeline
 
 
 def test_deferred_geodetic_fields_equal_those_of_their_own_call(sample_site_dir, tmp_path):
-    site = load_site(sample_site_dir)
-    dets = [d for d in make_scenario(site, "vehicle-run").detections if d.t_s < 8.0]
-    records = [
-        {"t": d.t_s, "sensor": d.sensor, "bbox": list(d.bbox), "class": d.cls, "score": 0.5}
-        for d in dets
-    ]
-    p = Pipeline(site, Store(tmp_path / "f.sqlite3"), "kalman", lambda _m: None)
-    p.start()
+    site, p, records = vehicle_run_pipeline(sample_site_dir, tmp_path, until_s=8.0)
     for r in records[: len(records) // 2]:  # some tracks, so points are converted too
         p.ingest([r])
     validated, _ = p._validate(records[len(records) // 2 :])

@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from server_helpers import vehicle_run_pipeline
 
 from demtrack.core.site import load_site
 from demtrack.samplesite.scenarios import make_scenario
@@ -16,14 +17,7 @@ pytestmark = pytest.mark.timeout(600)
 
 
 def test_live_fixes_equal_the_stored_bodies_fixes(sample_site_dir, tmp_path):
-    site = load_site(sample_site_dir)
-    dets = [d for d in make_scenario(site, "vehicle-run").detections if d.t_s < 6.0]
-    records = [
-        {"t": d.t_s, "sensor": d.sensor, "bbox": list(d.bbox), "class": d.cls, "score": 0.5}
-        for d in dets
-    ]
-    p = Pipeline(site, Store(tmp_path / "f.sqlite3"), "kalman", lambda _m: None)
-    p.start()
+    site, p, records = vehicle_run_pipeline(sample_site_dir, tmp_path, until_s=6.0)
     validated, _ = p._validate(records)
     pending = list(enumerate(validated, start=1))
     from demtrack.core.fix_builder import build_fixes
