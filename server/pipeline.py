@@ -67,19 +67,15 @@ _MAX_ISSUES = 20
 _REPLAY_DROP_EVERY = 4096
 
 
-def _hit(
-    p: list[float],
-    sigma: float,
-    geo: list[float],
-    cov: list[list[float]] | None = None,
-) -> dict[str, Any]:
+def _hit(p: list[float], sigma: float, cov: list[list[float]] | None = None) -> dict[str, Any]:
+    """A stored hit; its geodetic fields (None here, in their places) are filled later."""
     hit: dict[str, Any] = {
         "e_m": p[0],
         "n_m": p[1],
         "u_m": p[2],
-        "lat_deg": geo[0],
-        "lon_deg": geo[1],
-        "h_m": geo[2],
+        "lat_deg": None,
+        "lon_deg": None,
+        "h_m": None,
         "sigma_m": sigma,
     }
     if cov is not None:
@@ -569,8 +565,7 @@ class Pipeline:
         fixes, _ = build_fixes(self.site, dets)
         # The bodies' geodetic fields are filled by the track points' conversion below:
         # one pyproj round trip per batch, not two.
-        unfilled: list[tuple[np.ndarray, list[dict[str, Any]]]] = []
-        bodies = self._fix_bodies(pending, fixes, unfilled)
+        bodies, unfilled = self._fix_bodies(pending, fixes)
         fixed = {det_id for (det_id, _), body in zip(pending, bodies, strict=True) if body}
         rows: list[tuple[int, float, str, str, str, dict[str, Any]]] = []
         events: list[tuple[str, dict[str, Any]]] = []
@@ -651,16 +646,13 @@ class Pipeline:
         return min(ends) if len(ends) == len(ids) else -math.inf
 
     def _fix_bodies(
-        self,
-        pending: list[tuple[int, Detection]],
-        fixes: list[Fix],
-        unfilled: list[tuple[np.ndarray, list[dict[str, Any]]]] | None = None,
-    ) -> list[dict[str, Any] | None]:
-        """The stored body of each detection's fix (None: no fix); one geodetic call.
+        self, pending: list[tuple[int, Detection]], fixes: list[Fix]
+    ) -> tuple[list[dict[str, Any] | None], list[tuple[np.ndarray, list[dict[str, Any]]]]]:
+        """The stored body of each detection's fix (None: no fix), geodetic fields unfilled.
 
-        ``unfilled``: make no geodetic call; the hits' ``lat_deg``, ``lon_deg`` and
-        ``h_m`` are left None (in their places) and ``(points (k, 3), hit dicts)`` is
-        appended to it for :meth:`_refresh_points` to fill, before the bodies are used.
+        The hits' ``lat_deg``, ``lon_deg`` and ``h_m`` are left None (in their places);
+        the second value, ``[(points (k, 3), hit dicts)]`` (empty when there is no hit), is
+        for :meth:`_refresh_points` to fill them, before the bodies are used.
         """
         by_index = {f.detection_index: f for f in fixes}
         chunks = []
@@ -668,14 +660,7 @@ class Pipeline:
             chunks.append(f.hits_enu)
             if f.road_hit_enu is not None:
                 chunks.append(f.road_hit_enu[None, :])
-        if chunks and unfilled is None:
-            pts = np.vstack(chunks)
-            lat, lon, h = (np.atleast_1d(a) for a in self.site.frame.to_geodetic(*pts.T))
-            geo = np.column_stack([lat, lon, h]).tolist()
-        else:
-            geo = [[None, None, None]] * sum(len(c) for c in chunks)
         dicts: list[dict[str, Any]] = []
-        k = 0
         out: list[dict[str, Any] | None] = []
         for i, (det_id, d) in enumerate(pending):
             fix = by_index.get(i)
@@ -687,15 +672,13 @@ class Pipeline:
             for p, sigma, cov in zip(
                 fix.hits_enu.tolist(), fix.hit_sigma_m.tolist(), covs, strict=True
             ):
-                hits.append(_hit(p, sigma, geo[k], cov))
-                k += 1
+                hits.append(_hit(p, sigma, cov))
             dicts += hits
             road = None
             if fix.road_hit_enu is not None:
                 sigma = float(np.min(fix.hit_sigma_m)) if len(fix.hit_sigma_m) else 1.0
-                road = _hit(fix.road_hit_enu.tolist(), sigma, geo[k])
+                road = _hit(fix.road_hit_enu.tolist(), sigma)
                 dicts.append(road)
-                k += 1
             u0, _, u1, v1 = d.bbox
             self._queued_fixes[det_id] = _stored_fix(det_id, d, fix)
             out.append(
@@ -714,9 +697,7 @@ class Pipeline:
                     "tracked": True,
                 }
             )
-        if unfilled is not None and chunks:
-            unfilled.append((np.vstack(chunks), dicts))
-        return out
+        return out, [(np.vstack(chunks), dicts)] if chunks else []
 
     # ------------------------------------------------------------------ tracks
     def _refresh_points(
