@@ -52,6 +52,7 @@ __all__ = [
     "dumps_json",
     "loads_json",
     "migrate",
+    "published_text",
     "track_body_text",
 ]
 
@@ -253,6 +254,28 @@ def dumps_json(obj: Any) -> str:
     the server's numbers are finite by construction).
     """
     return _ENCODER.encode(obj).decode()
+
+
+def published_text(stored: str, seq: int) -> str:
+    """The stream's text of a stored event payload: ``dumps_json({**payload, "seq": seq})``.
+
+    The stored text is the payload's encoding (a JSON object without ``seq``); the key goes
+    last, as the dict merge puts it, so the text is the same without encoding it again.
+    """
+    return f'{stored[:-1]},"seq":{int(seq)}}}' if stored != "{}" else f'{{"seq":{int(seq)}}}'
+
+
+def _encode_reusing(payload: dict[str, Any], encoded: dict[int, tuple[Any, bytes]]) -> str:
+    """``dumps_json(payload)``, reusing encodings of values already encoded.
+
+    ``encoded`` maps ``id(object) -> (object, its JSON)``; a payload value that is one of
+    those objects (by identity) is inserted as that JSON, not encoded again.
+    """
+    if any(id(v) in encoded for v in payload.values()):
+        payload = {
+            k: msgspec.Raw(encoded[id(v)][1]) if id(v) in encoded else v for k, v in payload.items()
+        }
+    return dumps_json(payload)
 
 
 def loads_json(text: str | bytes) -> Any:
@@ -470,7 +493,7 @@ class Store:
         replace_tracks: bool = False,
         keep_track_ids: Iterable[int] = (),
         activity: Iterable[dict[str, Any]] = (),
-    ) -> list[int]:
+    ) -> list[tuple[int, str]]:
         """Store fixes, upsert tracks and activity, append events in one transaction.
 
         Parameters
@@ -496,15 +519,28 @@ class Store:
 
         Returns
         -------
-        list of int
-            The events' sequence numbers, in order.
+        list of (int, str)
+            Each event's sequence number and stored JSON text (its payload, without
+            ``seq``), in order: :func:`published_text` makes the stream's text of it.
+
+        Notes
+        -----
+        A fix body is encoded once: an event payload that holds one of this call's fix
+        bodies as a value (the ``fix`` stream message) reuses that encoding.
         """
 
-        def run(c: sqlite3.Connection) -> list[int]:
+        def run(c: sqlite3.Connection) -> list[tuple[int, str]]:
+            # id(fix body) -> (the body, kept alive so no other object takes its id; JSON)
+            encoded: dict[int, tuple[Any, bytes]] = {}
+            fix_rows = []
+            for i, t, s, k, st, b in fixes:
+                raw = _ENCODER.encode(b)
+                encoded[id(b)] = (b, raw)
+                fix_rows.append((i, t, s, k, st, raw.decode()))
             c.executemany(
                 "INSERT OR REPLACE INTO fixes (detection_id, t_s, sensor, cls, status, body)"
                 " VALUES (?,?,?,?,?,?)",
-                [(i, t, s, k, st, dumps_json(b)) for i, t, s, k, st, b in fixes],
+                fix_rows,
             )
             if replace_tracks:
                 keep = set(keep_track_ids)
@@ -573,7 +609,7 @@ class Store:
                         body["id"],
                     ),
                 )
-            rows = [(kind, dumps_json(payload)) for kind, payload in events]
+            rows = [(kind, _encode_reusing(payload, encoded)) for kind, payload in events]
             # AUTOINCREMENT: a sequence number is never reused, even after deletes.
             # The larger of the two, in one statement (both are at least 0).
             first = _next_id(
@@ -586,7 +622,7 @@ class Store:
                 "INSERT INTO events (seq, type, payload) VALUES (?, ?, ?)",
                 [(q, kind, text) for q, (kind, text) in zip(seqs, rows, strict=True)],
             )
-            return seqs
+            return [(q, text) for q, (_, text) in zip(seqs, rows, strict=True)]
 
         return self._tx(run, sync=False)  # derived rows: see the module docstring
 

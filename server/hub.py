@@ -26,7 +26,9 @@ __all__ = [
     "Client",
     "Hub",
     "OVERFLOW",
+    "StreamMessage",
     "batch_text",
+    "encoded",
     "pack",
     "take",
 ]
@@ -38,6 +40,27 @@ BATCH_MAX_MESSAGES = _BATCH_MAX
 #: A ``batch`` frame stops growing once its messages hold this many characters.
 BATCH_MAX_CHARS = 1_000_000
 _BATCH_HEAD = '{"type":"batch","seq":null,"messages":['
+
+
+class StreamMessage(dict):  # type: ignore[type-arg]
+    """A published message: the payload with its ``seq`` (last), carrying its JSON text.
+
+    The pipeline makes these from what the store wrote (:func:`~demtrack.server.db.
+    published_text`), so the hub queues ``text`` without encoding the message again;
+    subscribers that read the dict (the 3D scene) see an ordinary message.
+    """
+
+    __slots__ = ("text",)
+
+    def __init__(self, payload: dict[str, Any], seq: int, text: str) -> None:
+        super().__init__(payload)
+        self["seq"] = seq
+        self.text = text
+
+
+def encoded(message: dict[str, Any]) -> str:
+    """A message's JSON text: its own when it carries one, else ``dumps_json``."""
+    return message.text if isinstance(message, StreamMessage) else dumps_json(message)
 
 
 @dataclass(eq=False)
@@ -96,13 +119,13 @@ class Hub:
 
     def publish(self, messages: list[dict[str, Any]]) -> None:
         """Queue messages (dicts with ``seq``) for every client; on the event loop."""
-        encoded = [(int(m["seq"]), dumps_json(m)) for m in messages]
-        if encoded:
-            self.last_seq = max(self.last_seq, encoded[-1][0])
+        items = [(int(m["seq"]), encoded(m)) for m in messages]
+        if items:
+            self.last_seq = max(self.last_seq, items[-1][0])
         for client in list(self.clients):
             if client.overflowed:
                 continue
-            for item in encoded:
+            for item in items:
                 try:
                     client.queue.put_nowait(item)
                 except asyncio.QueueFull:

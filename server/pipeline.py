@@ -53,7 +53,8 @@ from demtrack.core.tracking import build_tracker
 from demtrack.core.tracking.types import CLASSES, Detection, Fix, Track
 from demtrack.core.zone_io import read_zones_geojson
 
-from .db import Store, dumps_json
+from .db import Store, dumps_json, published_text
+from .hub import StreamMessage
 from .live_events import LiveEventParams, LiveEvents
 
 __all__ = ["Pipeline", "fix_from_body", "pipeline_options"]
@@ -623,10 +624,15 @@ class Pipeline:
                 f" accepted, {n_fixes} fixes"
             )
             events.append(("event", {"type": "event", "kind": "ingest", "t_s": t, "text": text}))
-        seqs = self.store.write_derived(rows, track_rows, events, activity=activity)
+        stored = self.store.write_derived(rows, track_rows, events, activity=activity)
         for r in track_rows:  # stored: their points are clean
             self._dirty_from.pop(r["id"], None)
-        self.publish([{**p, "seq": s} for (_, p), s in zip(events, seqs, strict=True)])
+        self.publish(
+            [
+                StreamMessage(p, s, published_text(text, s))
+                for (_, p), (s, text) in zip(events, stored, strict=True)
+            ]
+        )
         self._drop_ended()  # after their final rows are stored
 
     def _window_tracks(self, t_from: float) -> list[Track]:
