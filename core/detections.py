@@ -205,7 +205,8 @@ class _Collector:
         if last is not None and t < last:
             raise _Skip("time_backwards", f"t={t} s is before {last} s for sensor {sensor}")
         self.last_t[sensor] = t
-        return Detection(t, sensor, tuple(box), cls, score, rec["local_id"])  # type: ignore[arg-type]
+        # checked above as the constructor would (the record's numbers are floats already)
+        return Detection._trusted(t, sensor, tuple(box), cls, score, rec["local_id"])  # type: ignore[arg-type]
 
     def result(self) -> tuple[list[Detection], IngestReport]:
         report = IngestReport(

@@ -106,6 +106,29 @@ class Detection:
         if self.score is not None:
             object.__setattr__(self, "score", float(self.score))
 
+    @classmethod
+    def _trusted(
+        cls,
+        t_s: float,
+        sensor: str,
+        bbox: tuple[float, float, float, float],
+        obj_cls: ObjectClass,
+        score: float | None,
+        local_id: str | None,
+    ) -> Detection:
+        """Internal: a detection from values already in the form ``__post_init__`` gives.
+
+        No check: the caller guarantees what the constructor would (a finite float
+        ``t_s``, a non-empty ``sensor``, a known class, a tuple of 4 finite floats in
+        order, a finite float or None ``score``). For the detection readers, which check
+        each record before making it.
+        """
+        det = object.__new__(cls)
+        det.__dict__.update(
+            t_s=t_s, sensor=sensor, bbox=bbox, cls=obj_cls, score=score, local_id=local_id
+        )
+        return det
+
     @property
     def foot_pixel(self) -> tuple[float, float]:
         """Bottom-centre of the box ``(u, v)`` (px): where the object meets the ground."""

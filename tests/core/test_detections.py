@@ -190,3 +190,33 @@ def test_parsed_records_get_the_jsonl_answer(records):
     got = read_detection_records(records, sensors=SENSORS, max_examples=100)
     assert got[0] == want[0]
     assert got[1] == want[1]
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.lists(
+        st.fixed_dictionaries(
+            {
+                "t": st.one_of(st.floats(allow_nan=True), st.integers(-100, 100)),
+                "sensor": st.sampled_from(["cam1", "cam2", ""]),
+                "bbox": st.lists(
+                    st.one_of(st.floats(-10, 700), st.integers(-5, 700)), min_size=4, max_size=4
+                ),
+                "class": st.sampled_from(["vehicle", "human", "tree"]),
+            },
+            optional={
+                "score": st.one_of(st.none(), st.floats(allow_nan=True), st.integers(0, 1)),
+                "local_id": st.one_of(st.none(), st.text(max_size=3), st.integers(0, 9)),
+            },
+        ),
+        max_size=12,
+    )
+)
+def test_accepted_records_equal_the_checked_constructor(records: list[dict]) -> None:
+    """The readers make detections without the constructor's checks: the same values and types."""
+    dets, _ = read_detection_records(records, sensors={"cam1": (640, 480), "cam2": (640, 480)})
+    for d in dets:
+        made = Detection(d.t_s, d.sensor, d.bbox, d.cls, d.score, d.local_id)
+        assert made == d
+        assert [type(v) for v in vars(made).values()] == [type(v) for v in vars(d).values()]
+        assert all(type(b) is float for b in d.bbox) and type(d.t_s) is float
