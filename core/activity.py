@@ -34,6 +34,8 @@ from typing import Any, Protocol
 import numpy as np
 import shapely
 
+from demtrack.core.polyline_kernels import project_points_kernel
+
 __all__ = [
     "ActivityEvent",
     "ConvoyParams",
@@ -338,9 +340,18 @@ def _running_median(t: np.ndarray, x: np.ndarray, half_s: float) -> np.ndarray:
 
 
 def _speed(p: np.ndarray, dt: float) -> np.ndarray:
+    """Horizontal speed at each of ``p`` (n, 3) sampled every ``dt`` (s), m/s.
+
+    ``np.gradient(p[:, :2], dt, axis=0)`` written out (the same arithmetic: central
+    differences inside, one-sided at the ends), without its per-call overhead.
+    """
     if len(p) < 2:
         return np.zeros(len(p))
-    v = np.gradient(p[:, :2], dt, axis=0)
+    xy = p[:, :2]
+    v = np.empty((len(p), 2))
+    v[1:-1] = (xy[2:] - xy[:-2]) / (2.0 * dt)
+    v[0] = (xy[1] - xy[0]) / dt
+    v[-1] = (xy[-1] - xy[-2]) / dt
     return np.hypot(v[:, 0], v[:, 1])
 
 
@@ -392,18 +403,25 @@ def detect_rendezvous(
         shared = np.minimum(t1[:, None], t1[None, :]) - np.maximum(t0[:, None], t0[None, :])
         near = _box_gaps(lo, hi) <= params.distance_m + _EPS
     cand = np.triu(valid[:, None] & valid[None, :] & near & (shared >= params.min_duration_s), 1)
-    out = []
+    pairs, grids = [], []
     for a, b in zip(*np.nonzero(cand), strict=True):
         ta, tb = trajectories[a].t_s, trajectories[b].t_s
         lo_t, hi_t = max(ta[0], tb[0]), min(ta[-1], tb[-1])
         if hi_t - lo_t < params.min_duration_s:
             continue
         grid = np.arange(lo_t, hi_t + 1e-9, params.dt_s)
+        if len(grid):
+            pairs.append((int(a), int(b)))
+            grids.append(grid)
+    out = []
+    for (a, b), grid, any_close in zip(
+        pairs, grids, _ever_close(trajectories, pairs, grids, params.distance_m), strict=True
+    ):
         # the horizontal test first: most pairs are never close, and their heights unread
+        if not any_close:
+            continue
         xa, xb = _resample(trajectories[a], grid, 2), _resample(trajectories[b], grid, 2)
         close = np.hypot(*(xa - xb).T) <= params.distance_m
-        if not close.any():
-            continue
         pa = np.column_stack([xa, _resample(trajectories[a], grid, 1, 2)])
         pb = np.column_stack([xb, _resample(trajectories[b], grid, 1, 2)])
         still = (_speed(pa, params.dt_s) < params.stop_speed_mps) & (
@@ -426,20 +444,58 @@ def detect_rendezvous(
     return out
 
 
+def _ever_close(
+    trajectories: Sequence[Trajectory],
+    pairs: Sequence[tuple[int, int]],
+    grids: Sequence[np.ndarray],
+    distance_m: float,
+) -> np.ndarray:
+    """Per pair ``(a, b)``, whether the two are ever within ``distance_m`` on its grid.
+
+    The rendezvous test's horizontal condition for all pairs at once, bit for bit: each
+    trajectory is resampled (:func:`_resample`, pointwise) once, at the grids of all its
+    pairs end to end, instead of once per pair. Every grid holds a point.
+    """
+    if not pairs:
+        return np.zeros(0, bool)
+    sizes = np.array([len(g) for g in grids])
+    starts = np.cumsum(sizes) - sizes
+    # every (pair, side) use of a trajectory, grouped by trajectory (pair order within)
+    owner = np.asarray(pairs).T.ravel()  # side 0 of every pair, then side 1
+    use = np.argsort(owner, kind="stable")
+    pair, side = use % len(pairs), use // len(pairs)
+    # the uses' grid points end to end, and where each goes in ``at``
+    query = np.concatenate([grids[i] for i in pair.tolist()])
+    n_use = sizes[pair]
+    where = np.arange(len(query)) - np.repeat(np.cumsum(n_use) - n_use - starts[pair], n_use)
+    side = np.repeat(side, n_use)
+    cut = np.concatenate([[0], np.cumsum(n_use)])
+    bounds = np.flatnonzero(np.diff(owner[use])) + 1  # first use of each next trajectory
+    first_use = np.concatenate([[0], bounds]).tolist()
+    last_use = np.concatenate([bounds, [len(use)]]).tolist()
+    at = np.empty((2, int(sizes.sum()), 2))  # side, grid point, (x, y)
+    for u0, u1 in zip(first_use, last_use, strict=True):
+        q = slice(int(cut[u0]), int(cut[u1]))
+        at[side[q], where[q]] = _resample(trajectories[int(owner[use[u0]])], query[q], 2)
+    close = np.hypot(*(at[0] - at[1]).T) <= distance_m
+    return np.logical_or.reduceat(close, starts)
+
+
 @dataclass(eq=False)
 class _Drive:
     """One trajectory's figures for the convoy test, computed once per call.
 
     ``s_m`` (n,) is the cumulative horizontal path length (m); ``moving`` (n,) the speed
-    (m/s), ``line`` (shapely) and ``tables`` (:func:`_range_tables` of the positions) are
-    made when first needed.
+    (m/s), ``path`` (the horizontal vertices as two contiguous arrays, for
+    :func:`~demtrack.core.polyline_kernels.project_points_kernel`) and ``tables``
+    (:func:`_range_tables` of the positions) are made when first needed.
     """
 
     t: np.ndarray
     p: np.ndarray
     s_m: np.ndarray
     _moving: np.ndarray | None = None
-    _line: shapely.LineString | None = None
+    _path: tuple[np.ndarray, np.ndarray] | None = None
     _tables: tuple[np.ndarray, np.ndarray] | None = None
 
     @classmethod
@@ -456,16 +512,32 @@ class _Drive:
         return self._moving
 
     @property
-    def line(self) -> shapely.LineString:
-        if self._line is None:
-            self._line = shapely.LineString(self.p[:, :2])
-        return self._line
+    def path(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._path is None:
+            self._path = (np.ascontiguousarray(self.p[:, 0]), np.ascontiguousarray(self.p[:, 1]))
+        return self._path
 
     @property
     def tables(self) -> tuple[np.ndarray, np.ndarray]:
         if self._tables is None:
             self._tables = _range_tables(self.p[:, :2])
         return self._tables
+
+
+def _project(leader: _Drive, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance of each point ``xy`` (m, 2) to the leader's path, and the length along it.
+
+    The same bits as ``shapely.distance(points, line)`` and
+    ``shapely.line_locate_point(line, points)`` of the path's ``LineString`` (see
+    :mod:`~demtrack.core.polyline_kernels`), both in one pass, without making shapely
+    points.
+    """
+    dist, along = np.empty(len(xy)), np.empty(len(xy))
+    if len(xy):
+        lx, ly = leader.path
+        px, py = np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1])
+        project_points_kernel(lx, ly, px, py, dist, along)
+    return dist, along
 
 
 def _follow_stretches(
@@ -484,9 +556,7 @@ def _follow_stretches(
     """
     tl, tf, xy = leader.t, fleet.t, fleet.xy
     idx = np.flatnonzero(cand)
-    pts = fleet.points[idx]
-    off_path = shapely.distance(pts, leader.line)
-    s_on = shapely.line_locate_point(leader.line, pts)
+    off_path, s_on = _project(leader, xy[idx])
     t_there = np.interp(s_on, leader.s_m, tl)  # when the leader was where the follower is
     lag = np.zeros(len(tf))
     lag[idx] = tf[idx] - t_there
@@ -540,14 +610,6 @@ class _Fleet:
     first: np.ndarray
     last: np.ndarray
     span: dict[int, tuple[int, int]]
-    _points: np.ndarray | None = None
-
-    @property
-    def points(self) -> np.ndarray:
-        """The points as shapely points (N,), made when first needed."""
-        if self._points is None:
-            self._points = shapely.points(self.xy[:, 0], self.xy[:, 1])
-        return self._points
 
     @classmethod
     def of(cls, drives: dict[int, _Drive], members: Sequence[int]) -> _Fleet:

@@ -25,6 +25,7 @@ it can be published while the next evaluation runs.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -70,13 +71,25 @@ class LiveEventParams:
 
 @dataclass(frozen=True, eq=False)
 class Window:
-    """A track's points inside the evaluation window, thinned (what the detectors read)."""
+    """A track's points inside the evaluation window, thinned (what the detectors read).
+
+    ``index`` (n,) holds the kept points' indices in ``track.points``; ``sensors`` (each
+    kept point's sensors) is read from them when first needed (only an event's body reads
+    it).
+    """
 
     id: int
     cls: str
     t_s: np.ndarray
     p_enu: np.ndarray
-    sensors: tuple[tuple[str, ...], ...]
+    track: Track
+    index: np.ndarray
+
+    @functools.cached_property
+    def sensors(self) -> tuple[tuple[str, ...], ...]:
+        """Each kept point's sensors."""
+        points = self.track.points
+        return tuple(points[k].sensors for k in self.index.tolist())
 
 
 def _thin(track: Track, t_from: float, sample_s: float) -> Window | None:
@@ -92,14 +105,9 @@ def _thin(track: Track, t_from: float, sample_s: float) -> Window | None:
     keep = keep[np.concatenate(([True], keep[1:] != keep[:-1]))[: len(keep)]]
     if not len(keep) or keep[-1] != len(t) - 1:
         keep = np.append(keep, len(t) - 1)
-    pts = [track.points[k] for k in (keep + k0).tolist()]
-    return Window(
-        track.id,
-        track.cls,
-        t[keep],
-        np.array([p.p_enu for p in pts], dtype=float),
-        tuple(p.sensors for p in pts),
-    )
+    index = keep + k0
+    # the track's cached (n, 3) positions: the points' own values, stacked once per track
+    return Window(track.id, track.cls, t[keep], track.p_enu[index], track, index)
 
 
 def _identity(e: ActivityEvent) -> str:
