@@ -50,6 +50,7 @@ __all__ = [
     "StoredBatch",
     "connect",
     "dumps_json",
+    "encode_json",
     "loads_json",
     "migrate",
     "published_text",
@@ -253,7 +254,12 @@ def dumps_json(obj: Any) -> str:
     carry no ``+`` (``1e21``) and NaN or infinities become ``null`` (JSON has neither;
     the server's numbers are finite by construction).
     """
-    return _ENCODER.encode(obj).decode()
+    return encode_json(obj).decode()
+
+
+def encode_json(obj: Any) -> bytes:
+    """:func:`dumps_json`'s text as UTF-8 bytes (one msgspec encoder for the whole server)."""
+    return _ENCODER.encode(obj)
 
 
 def published_text(stored: str, seq: int) -> str:
@@ -534,7 +540,7 @@ class Store:
             encoded: dict[int, tuple[Any, bytes]] = {}
             fix_rows = []
             for i, t, s, k, st, b in fixes:
-                raw = _ENCODER.encode(b)
+                raw = encode_json(b)
                 encoded[id(b)] = (b, raw)
                 fix_rows.append((i, t, s, k, st, raw.decode()))
             c.executemany(

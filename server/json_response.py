@@ -12,29 +12,23 @@ The caller is responsible for what validation gave for free: the keys must be ex
 the model's (pydantic would have rejected extra keys of ``extra="forbid"`` models and
 filled defaults), aliases applied (``"class"``, not ``cls``), and every value JSON-able.
 The tests compare each such route with ``Model.model_validate(...)`` of the same data.
+
+The body is encoded as every stored body is (:func:`~demtrack.server.db.encode_json`,
+msgspec): the JSON pydantic's ``dump_json`` writes for the same values, except that
+integers stay integers where a model would have made them floats (``5`` rather than
+``5.0``: the same JSON number) and NaN or infinities become ``null`` (the server's numbers
+are finite by construction).
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-import msgspec
 from starlette.responses import Response
 
-__all__ = ["encode_json", "json_response"]
+from .db import encode_json
 
-_ENCODER = msgspec.json.Encoder()
-
-
-def encode_json(content: Any) -> bytes:
-    """Compact JSON bytes of ``content`` (dicts, lists, tuples, str, int, float, bool, None).
-
-    msgspec's encoder: the JSON pydantic's ``dump_json`` writes for the same values,
-    except that integers stay integers where a model would have made them floats
-    (``5`` rather than ``5.0``: the same JSON number) and NaN or infinities become
-    ``null`` (the server's numbers are finite by construction).
-    """
-    return _ENCODER.encode(content)
+__all__ = ["json_response"]
 
 
 def json_response(content: Any, status_code: int = 200) -> Response:

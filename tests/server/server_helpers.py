@@ -70,3 +70,16 @@ def vehicle_run_pipeline(site_dir: Path, tmp: Path, until_s: float):
     p = Pipeline(site, Store(tmp / "f.sqlite3"), "kalman", lambda _m: None)
     p.start()
     return site, p, records
+
+
+def post_in_time_batches(client, records: list[dict[str, Any]], span_s: float = 0.5) -> None:
+    """POST time-ordered detection ``records`` as batches each spanning under ``span_s``;
+    every batch must be accepted."""
+    k = 0
+    while k < len(records):
+        j = k
+        while j < len(records) and records[j]["t"] < records[k]["t"] + span_s:
+            j += 1
+        r = client.post("/api/detections", headers=AUTH, json={"detections": records[k:j]})
+        assert r.status_code == 200
+        k = j

@@ -13,7 +13,7 @@ from xml.etree import ElementTree as ET
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
-from server_helpers import AUTH, make_app
+from server_helpers import AUTH, make_app, post_in_time_batches
 
 from demtrack.core.site import load_site
 from demtrack.core.track_io import GPX_NS, KML_NS
@@ -34,14 +34,7 @@ def fed(sample_site_dir, tmp_path_factory):
         if d.t_s < 30.0
     ]
     with TestClient(make_app(sample_site_dir, tmp_path_factory.mktemp("syn"))) as c:
-        k = 0
-        while k < len(recs):
-            j = k
-            while j < len(recs) and recs[j]["t"] < recs[k]["t"] + 0.5:
-                j += 1
-            r = c.post("/api/detections", headers=AUTH, json={"detections": recs[k:j]})
-            assert r.status_code == 200
-            k = j
+        post_in_time_batches(c, recs)
         yield c
 
 

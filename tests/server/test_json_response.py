@@ -16,11 +16,12 @@ from typing import Any
 import pytest
 from fastapi.testclient import TestClient
 from pydantic import TypeAdapter
-from server_helpers import AUTH, make_app, walk
+from server_helpers import AUTH, make_app, post_in_time_batches, walk
 
 from demtrack.core.site import load_site
 from demtrack.samplesite.scenarios import make_scenario
-from demtrack.server.json_response import encode_json, json_response
+from demtrack.server.db import encode_json
+from demtrack.server.json_response import json_response
 from demtrack.server.models import StoredDetectionOut, TracksOut
 from demtrack.server.routers.synopsis import SynopsisOut, synopsis
 from demtrack.server.routers.tracks import filter_tracks
@@ -43,14 +44,7 @@ def fed(sample_site_dir, tmp_path_factory):
         ]
     recs.sort(key=lambda r: (r["t"], r["sensor"]))
     with TestClient(make_app(sample_site_dir, tmp_path_factory.mktemp("jr"))) as c:
-        k = 0
-        while k < len(recs):
-            j = k
-            while j < len(recs) and recs[j]["t"] < recs[k]["t"] + 0.5:
-                j += 1
-            r = c.post("/api/detections", headers=AUTH, json={"detections": recs[k:j]})
-            assert r.status_code == 200
-            k = j
+        post_in_time_batches(c, recs)
         yield c
 
 
