@@ -388,11 +388,11 @@ class RayCaster:
         n = len(o)
         # Light kernels: an angular index only when asked for (its kernels are slow to
         # compile); the answers are the same either way.
-        runs = (
-            _ak.origin_runs_kernel(o, 1 if coherent else MIN_COHERENT_RUN)
-            if n and (coherent or (coherent is None and not light))
-            else np.empty((0, 2), np.int64)
-        )
+        runs = np.empty((0, 2), np.int64)
+        if n and (coherent or (coherent is None and not light)):
+            with _threads_for(n):
+                min_run = 1 if coherent else MIN_COHERENT_RUN
+                runs = _ak.origin_runs_kernel(o, min_run, numba.get_num_threads())
         keep = _FIRST_PASS_HITS_RUNS if len(runs) else _FIRST_PASS_HITS
         cap = 1 if first else min(keep, max_hits)
         with self._first_pass_scratch(n, cap) as (buf, counts):
@@ -824,7 +824,8 @@ def _validate_rays(
         raise RaycastError(f"max_range must be a number or an array of shape ({len(o)},)") from None
     # A fresh writable C array always, so the kernels see one signature only.
     rng = np.array(rng, dtype=np.float64)
-    code, i = _k.check_rays_kernel(o, d, rng)
+    with _threads_for(len(o)):
+        code, i = _k.check_rays_kernel(o, d, rng, numba.get_num_threads())
     if code == 1:
         raise RaycastError(f"origins must be finite (ray {i} is not)")
     if code == 2:
