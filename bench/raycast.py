@@ -7,13 +7,18 @@ thread count: numba via ``numba.set_num_threads``, Open3D via its ``nthreads`` a
 
 Timings are the best of ``--repeat`` rounds; each round runs the two engines' casts of one
 ray set and mode in turn (demtrack, Open3D, demtrack, ...), so swings of load on a shared
-machine fall on both alike. Set-up and peak memory are measured first, per engine on its
-own (demtrack's before Open3D builds anything), with one untimed cast of each set that also
-gives the answers compared at the end. Peak memory is the rise of the process's peak
-resident set size (``VmHWM``, reset through ``/proc/self/clear_refs``) over its resident
-size just before the engine's set-up, so it covers set-up and every cast including the
-result arrays, and excludes the inputs (DEM, rays and, for Open3D, the mesh tensors handed
-to it). Without ``clear_refs`` it falls back to a plain RSS difference (a lower bound).
+machine fall on both alike. Each timed cast directly follows an untimed run of the same
+cast by the same engine, so neither is timed on caches the other engine has just filled:
+right after an Embree cast (its BVH is about 0.9 GB), demtrack's camera first-hit cast
+took 106-114 ms, against 79-81 ms after one of its own; what a console casting frame after
+frame sees is the latter, for either engine. Set-up and peak memory are measured first,
+per engine on its own (demtrack's before Open3D builds anything), with one untimed cast of
+each set that also gives the answers compared at the end. Peak memory is the rise of the
+process's peak resident set size (``VmHWM``, reset through ``/proc/self/clear_refs``) over
+its resident size just before the engine's set-up, so it covers set-up and every cast
+including the result arrays, and excludes the inputs (DEM, rays and, for Open3D, the mesh
+tensors handed to it). Without ``clear_refs`` it falls back to a plain RSS difference (a
+lower bound).
 
 Camera rays (one origin per camera) are cast with per-origin angular indexes
 (``core.angular_index``); their build is timed apart ("set-up per camera") and the
@@ -96,6 +101,7 @@ def _cpu_one_thread(casts: dict, repeat: int, n: int) -> dict:
     try:
         for _ in range(max(1, repeat)):
             for key, fn in casts.items():
+                fn()  # warm, as in _time_rates
                 gc.collect()
                 t0 = time.process_time()
                 fn()
@@ -235,7 +241,8 @@ def _time_rates(sets: dict, ours: _Result, theirs: _Result | None, repeat: int) 
 
     Each round runs every engine's cast of one ray set and mode once, in turn (ours,
     theirs, ours, theirs, ...), so load from other jobs on a shared machine falls on
-    both engines alike rather than on whichever was timed first.
+    both engines alike rather than on whichever was timed first; each timed cast follows
+    an untimed one of its own (see the module docstring).
     """
     for name, (o, _d) in sets.items():
         for mode in ("first", "all"):
@@ -249,6 +256,7 @@ def _time_rates(sets: dict, ours: _Result, theirs: _Result | None, repeat: int) 
             best = dict.fromkeys(fns, np.inf)
             for _ in range(max(1, repeat)):
                 for key, fn in fns.items():
+                    fn()  # warm: not timed on caches the other engine just filled
                     gc.collect()
                     t0 = time.perf_counter()
                     out = fn()
