@@ -64,7 +64,9 @@ BLOCK = 64
 #: well beyond a block on purpose: with scratch of exactly one block the two-thread
 #: camera casts ran 5-8 % slower than with this (stable over repeated A/B runs), the
 #: one-thread ones did not; the placement of small per-thread allocations (a cache line
-#: shared by two threads, or stores aliasing loads 4 KiB apart) is the likely cause.
+#: shared by two threads, or stores aliasing loads 4 KiB apart) is the likely cause. numba
+#: hoists these allocations out of the ``prange`` body into the start of each worker's chunk
+#: (``parfor_lowering.hoist``): one scratch per thread and launch, never shared.
 SCRATCH_ROWS = 10 * BLOCK
 #: Slack (m of range) on each side of a patch's stretch when accepting a root, so a root
 #: exactly on a patch edge, rounded to either side, is found by at least one patch.
