@@ -43,8 +43,11 @@ import msgspec
 
 from demtrack.core.tracking.types import Detection
 
+from .track_history import PointCuts
+
 __all__ = [
     "MIGRATIONS",
+    "TrackTail",
     "SCHEMA_VERSION",
     "Store",
     "StoredBatch",
@@ -222,6 +225,20 @@ def migrate(conn: sqlite3.Connection) -> int:
 
 
 @dataclass(frozen=True)
+class TrackTail:
+    """What changed in a track's stored body since a version the reader holds.
+
+    ``head``: the body without ``points`` (JSON text); ``first``: the index of the first
+    point that changed; ``points``: the JSON texts of the points from ``first`` on (the
+    stored points before ``first`` are those of the reader's version).
+    """
+
+    head: str
+    first: int
+    points: list[str]
+
+
+@dataclass(frozen=True)
 class StoredBatch:
     """A committed ingest batch.
 
@@ -337,6 +354,14 @@ def _id_chunks(ids: Sequence[int], size: int = 500) -> Iterator[tuple[list[int],
         yield chunk, ",".join("?" * len(chunk))
 
 
+def _track_revs(c: sqlite3.Connection, ids: Sequence[int]) -> dict[int, int]:
+    """The current ``track_rev`` of tracks ``ids`` (those that have one)."""
+    out: dict[int, int] = {}
+    for chunk, marks in _id_chunks(ids):
+        out.update(c.execute(f"SELECT id, rev FROM track_rev WHERE id IN ({marks})", chunk))  # noqa: S608
+    return out
+
+
 def _points_of(c: sqlite3.Connection, ids: Sequence[int]) -> dict[int, list[str]]:
     """The stored point texts of tracks ``ids``, in order (an empty list for none)."""
     out: dict[int, list[str]] = {i: [] for i in ids}
@@ -398,6 +423,7 @@ class Store:
         self._r = connect(self.path)
         self._wlock = threading.Lock()
         self._rlock = threading.Lock()
+        self._cuts = PointCuts()  # what each track write rewrote, for track_rows(tails=True)
 
     def close(self) -> None:
         """Close both connections."""
@@ -534,6 +560,7 @@ class Store:
         A fix body is encoded once: an event payload that holds one of this call's fix
         bodies as a value (the ``fix`` stream message) reuses that encoding.
         """
+        track_list = list(tracks)
 
         def run(c: sqlite3.Connection) -> list[tuple[int, str]]:
             # id(fix body) -> (the body, kept alive so no other object takes its id; JSON)
@@ -549,6 +576,7 @@ class Store:
                 fix_rows,
             )
             if replace_tracks:
+                self._cuts.clear()  # and nothing of this call is recorded: chains break
                 keep = set(keep_track_ids)
                 if keep:
                     gone = [(i,) for (i,) in c.execute("SELECT id FROM tracks") if i not in keep]
@@ -558,7 +586,8 @@ class Store:
                     c.execute("DELETE FROM tracks")
                     c.execute("DELETE FROM track_points")
             heads, cuts, points = [], [], []
-            for r in tracks:
+            before = {} if replace_tracks else _track_revs(c, [r["id"] for r in track_list])
+            for r in track_list:
                 head, texts, start = _split_track_body(r)
                 heads.append(
                     (
@@ -585,6 +614,11 @@ class Store:
             # Points from the first that changed on: dropped, then written again.
             c.executemany("DELETE FROM track_points WHERE track_id = ? AND k >= ?", cuts)
             c.executemany("INSERT INTO track_points (track_id, k, point) VALUES (?,?,?)", points)
+            if cuts and not replace_tracks:
+                starts: dict[int, int] = {}
+                for i, start in cuts:
+                    starts[i] = min(start, starts.get(i, start))
+                self._cuts.record(before, _track_revs(c, list(starts)), starts)
             for body in activity:
                 row = c.execute("SELECT id FROM activity WHERE key = ?", (body["key"],)).fetchone()
                 if row is None:
@@ -755,12 +789,16 @@ class Store:
         t_to: float | None = None,
         cls: str | None = None,
         bbox: tuple[float, float, float, float] | None = None,
-    ) -> list[tuple[int, int, str | None]]:
+        tails: bool = False,
+    ) -> list[tuple[int, int, Any]]:
         """``(id, rev, body text)`` of the tracks :meth:`tracks` selects, by id.
 
         The text is None for a track whose ``rev`` is ``known[id]`` (the caller holds
         that version: ``rev``, from ``track_rev``, changes whenever the row is written),
-        so only new and changed bodies are read. Both reads see one snapshot of the file.
+        so only new and changed bodies are read. With ``tails``, a changed track whose
+        writes since ``known[id]`` this store made (``server.track_history``) comes as a
+        :class:`TrackTail` instead: its head and only the points from the first that
+        changed. Both reads see one snapshot of the file.
         """
         where, params = _track_where(t_from, t_to, cls, bbox)
         with self._snapshot() as r:
@@ -769,14 +807,33 @@ class Store:
                 params,
             ).fetchall()
             todo = [i for i, rev in heads if known.get(i) != rev]
-            texts: dict[int, tuple[int, str]] = {}
-            points = _points_of(r, todo)
+            cut: dict[int, int] = {}
+            if tails:
+                for i, rev in heads:
+                    held = known.get(i)
+                    k0 = None if held in (None, rev) else self._cuts.first_changed(i, held, rev)
+                    if k0 is not None:
+                        cut[i] = k0
+            whole = [i for i in todo if i not in cut]
+            texts: dict[int, tuple[int, Any]] = {}
+            points = _points_of(r, whole)
             for chunk, marks in _id_chunks(todo):
                 for i, rev, body in r.execute(
                     f"SELECT id, {_REV}, body FROM tracks WHERE id IN ({marks})",  # noqa: S608
                     chunk,
                 ):
-                    texts[i] = (rev, track_body_text(body, points[i]))
+                    if i in cut:
+                        tail = [
+                            p
+                            for (p,) in r.execute(
+                                "SELECT point FROM track_points WHERE track_id = ? AND k >= ?"
+                                " ORDER BY k",
+                                (i, cut[i]),
+                            )
+                        ]
+                        texts[i] = (rev, TrackTail(body, cut[i], tail))
+                    else:
+                        texts[i] = (rev, track_body_text(body, points[i]))
         return [(i, *texts[i]) if i in texts else (i, rev, None) for i, rev in heads]
 
     def track(self, track_id: int) -> dict[str, Any] | None:
