@@ -44,6 +44,7 @@ import logging
 import math
 import re
 import threading
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -105,6 +106,9 @@ SESSION_PATTERN = r"^[A-Za-z0-9_-]{8,64}$"
 FOLLOW_PATH = "/follow/"
 #: Most sessions whose follow choice is kept (the oldest choice goes first).
 _MAX_SESSIONS = 256
+#: How long (s) a client just aimed is aimed again until it reports looking at the target
+#: (a camera report it sent before our move can land after it and undo it on our side).
+_SETTLE_S = 20.0
 _SESSION_RE = re.compile(SESSION_PATTERN)
 
 
@@ -434,6 +438,9 @@ class Scene3D:
         self._client_session: dict[int, str | None] = {}
         #: Each following client's own head marker and label (client-scoped nodes).
         self._markers: dict[int, tuple[Any, Any]] = {}
+        #: Clients aimed but not yet seen looking at the target: id -> (target, offset,
+        #: wall-clock time of the move, monotonic deadline). The scene thread's own.
+        self._unsettled: dict[int, tuple[np.ndarray, np.ndarray, float, float]] = {}
         #: Tracks drawn as followed: the broadcast's and those of sessions with a client.
         self._highlighted: set[int] = set()
         self._aim_lock = threading.Lock()
@@ -827,6 +834,47 @@ class Scene3D:
                         cam.look_at = tuple(float(x) for x in target)
                 except Exception:  # noqa: BLE001 - a client that left meanwhile
                     log.debug("could not move client %s's camera", client.client_id)
+                    offset = start
+                # viser stamps our moves with the wall clock, and each client report too
+                self._unsettled[int(client.client_id)] = (
+                    target,
+                    offset,
+                    time.time(),
+                    time.monotonic() + _SETTLE_S,
+                )
+
+    def _settle(self, clients: list[Any], target: np.ndarray) -> None:
+        """Aim again those of ``clients`` whose first report since their aim missed it.
+
+        viser keeps the camera a client last reported: a report the client sent before
+        our move reached it can arrive after the move and put the camera (on our side,
+        and so the offset kept next) back where it was. A client is aimed again until one
+        of its reports looks at ``target`` (or :data:`_SETTLE_S` pass); from then on it is
+        left alone, so that the operator can look around.
+        """
+        now = time.monotonic()
+        for client in clients:
+            cid = int(client.client_id)
+            pending = self._unsettled.get(cid)
+            if pending is None:
+                continue
+            aimed, offset, aimed_at, deadline = pending
+            if now > deadline or not np.allclose(aimed, target):
+                self._unsettled.pop(cid, None)
+                continue
+            cam = client.camera
+            try:
+                if cam.update_timestamp <= aimed_at:
+                    continue  # no report since our move: the camera is still ours
+                looks = np.allclose(cam.look_at, target, rtol=0.0, atol=1e-3)
+            except AssertionError:  # no report at all yet
+                continue
+            if looks:
+                self._unsettled.pop(cid, None)
+                continue
+            self._aim([client], target, offset, keep_offset=False)
+            if cid in self._unsettled:
+                self._unsettled[cid] = (*self._unsettled[cid][:3], deadline)
 
     def _mark(self, client: Any, track_id: int, target: np.ndarray) -> None:
         """Put ``client``'s own head marker and label at ``target`` (client-scoped nodes)."""
@@ -879,10 +927,13 @@ class Scene3D:
         if not self._follows:
             return
         groups: dict[str | None, list[Any]] = {}
-        for cid, client in self.server.get_clients().items():
+        present = self.server.get_clients()
+        for cid, client in present.items():
             session = self._client_session.get(cid)
             key = session if session is not None and session in self._follows else None
             groups.setdefault(key, []).append(client)
+        for cid in [c for c in self._unsettled if c not in present]:
+            del self._unsettled[cid]  # gone
         for key, rec in list(self._follows.items()):
             pts = self._points_of(rec.track_id)
             if rec.track_id is None or pts is None:
@@ -890,6 +941,7 @@ class Scene3D:
             target = pts[-1] + [0.0, 0.0, _LIFT_M]
             first = rec.offset is None
             if not first and rec.target is not None and np.allclose(target, rec.target):
+                self._settle(groups.get(key, []), rec.target)
                 continue
             start = follow_offset(pts) if rec.offset is None else rec.offset
             rec.offset, rec.target = start, target

@@ -465,6 +465,45 @@ def test_follow_moves_every_client_camera_to_the_track(scene):
         scene.follow(None)
 
 
+def test_a_stale_camera_report_after_a_move_is_aimed_again_until_the_client_looks(scene):
+    """A client's report sent before our move reached it lands after the move: aim again.
+
+    Once a report of the client looks at the target, the operator's own moves are kept.
+    """
+    lift = np.array([0.0, 0.0, 0.4])
+    session = "settle-0123456"
+    a = FakeViserClient(scene.server.get_port(), f"/follow/{session}")
+    try:
+        stale = (np.array([0.0, -200.0, 150.0]), np.zeros(3))
+        a.send_camera(*stale)
+        wait_for(lambda: len(scene.follow_state(session)["clients"]) == 1)
+        [client] = (c for c in scene.server.get_clients().values()
+                    if scene._client_session.get(int(c.client_id)) == session)  # fmt: skip
+        walk = [(30.0, 10.0 + 4.0 * k, 2.0) for k in range(5)]  # northwards
+        head = np.array(walk[-1]) + lift
+        scene.follow(61, follow_body(61, walk), session=session)
+        assert scene.flush()
+        start = client.camera.position.copy()
+        np.testing.assert_allclose(client.camera.look_at, head, atol=1e-9)
+        # The client's older camera arrives after the move: the scene aims it again.
+        a.send_camera(*stale)
+        wait_for(lambda: np.allclose(client.camera.look_at, head, atol=1e-9))
+        np.testing.assert_allclose(client.camera.position, start, atol=1e-9)
+        # The client reports the target: settled. The operator then pans: kept.
+        a.send_camera(start, head)
+        wait_for(lambda: client.camera.update_timestamp > 0 and scene._unsettled.get(
+            int(client.client_id)) is None)  # fmt: skip
+        pan = (start + [5.0, 0.0, 0.0], head + [5.0, 0.0, 0.0])
+        a.send_camera(*pan)
+        wait_for(lambda: np.allclose(client.camera.look_at, pan[1]))
+        assert scene.flush() and scene.flush()  # passes after the report
+        np.testing.assert_allclose(client.camera.look_at, pan[1])
+        np.testing.assert_allclose(client.camera.position, pan[0])
+    finally:
+        a.close()
+        scene.follow(None, session=session)
+
+
 def test_session_of_path():
     assert session_of_path("/follow/abcd1234") == "abcd1234"
     assert session_of_path("/follow/abcd-_1234/?x=1") == "abcd-_1234"

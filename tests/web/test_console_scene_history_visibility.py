@@ -22,10 +22,13 @@ WINDOW_S = 0.6  # cameras.mjs BOX_WINDOW_S
 LIFT_M = 0.4  # the 3D scene draws tracks this far above their points
 
 
-def poll(fn, timeout_s: float = 60.0, every_s: float = 0.25) -> Any:
-    """``fn()`` until it returns something truthy (or fail after ``timeout_s``)."""
+def poll(fn, timeout_s: float = 60.0, every_s: float = 0.25, seen: Any = None) -> Any:
+    """``fn()`` until it returns something truthy (or fail after ``timeout_s``).
+
+    ``seen``: a list ``fn`` keeps what it last looked at in, shown when it fails.
+    """
     out = wait_until(fn, timeout_s, every_s)
-    assert out, "timed out"
+    assert out, f"timed out; last seen: {seen[-1] if seen else None}"
     return out
 
 
@@ -78,8 +81,12 @@ def test_selecting_a_track_makes_the_3d_cameras_follow_it(
                 p = c.get(f"/api/tracks/{tid}").json()["tracks"][0]["points"][-1]
                 return [p["e_m"], p["n_m"], p["u_m"] + LIFT_M]
 
+            seen: list[Any] = []
+
             def looking_at(session: str, tid: int, want: list[float]) -> bool:
                 st = c.get("/api/scene3d/follow", params={"session": session}).json()
+                seen.append({"want": want, "state": st})
+                del seen[:-1]
                 return (
                     st["track_id"] == tid
                     and math.dist(st["look_at_enu"], want) < 1e-6
@@ -103,8 +110,8 @@ def test_selecting_a_track_makes_the_3d_cameras_follow_it(
                 assert src.endswith(f"%2Ffollow%2F{sid}")
             first = {1: newest(1), t2: newest(t2)}
             assert math.dist(first[1], first[t2]) > 1.0
-            poll(lambda: looking_at(s1, 1, first[1]), 120)
-            poll(lambda: looking_at(s2, t2, first[t2]), 120)
+            poll(lambda: looking_at(s1, 1, first[1]), 120, seen=seen)
+            poll(lambda: looking_at(s2, t2, first[t2]), 120, seen=seen)
             page.locator("#tab-map").click()
             page2.locator("#tab-map").click()
             everyone = c.get("/api/scene3d/follow").json()
@@ -114,8 +121,8 @@ def test_selecting_a_track_makes_the_3d_cameras_follow_it(
             post_until(c, scenario_records, 16.0, 24.0)
             second = newest(1)
             assert math.dist(first[1], second) > 5.0
-            poll(lambda: looking_at(s1, 1, second))
-            poll(lambda: looking_at(s2, t2, newest(t2)))
+            poll(lambda: looking_at(s1, 1, second), seen=seen)
+            poll(lambda: looking_at(s2, t2, newest(t2)), seen=seen)
             cam = c.get("/api/scene3d/follow", params={"session": s1}).json()["clients"][0]
             assert cam["position_enu"][2] > second[2] + 10.0  # above the head, not on it
             page.locator("#tab-3d").click()
