@@ -872,9 +872,8 @@ class Scene3D:
             if looks:
                 self._unsettled.pop(cid, None)
                 continue
-            self._aim([client], target, offset, keep_offset=False)
-            if cid in self._unsettled:
-                self._unsettled[cid] = (*self._unsettled[cid][:3], deadline)
+            self._aim([client], target, offset, keep_offset=False)  # records a new move
+            self._unsettled[cid] = (*self._unsettled[cid][:3], deadline)  # the first's end
 
     def _mark(self, client: Any, track_id: int, target: np.ndarray) -> None:
         """Put ``client``'s own head marker and label at ``target`` (client-scoped nodes)."""
