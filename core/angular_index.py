@@ -86,9 +86,10 @@ class AngularIndex:
         height per cell of distance from ``O``) of every node of the range tree.
     t_off, t_size : ndarray, int64, shape (n_levels,)
         Start and size of each tree level within a slot (level 0 = range bins).
-    start : ndarray, int32, shape (n_slots, n_q)
+    start : ndarray, int32, shape (n_slots, n_q, 2)
         Per built azimuth bin and slope class (``core.angular_kernels.slope_class``), the
-        first range bin a ray of that class can cross the terrain in.
+        first (``[..., 0]``) and last (``[..., 1]``, -1 if none) range bin a ray of that
+        class can cross the terrain in.
     s_unit : float
         Slope scale of the classes (the cell size: classes are uniform in
         ``tan(elevation) / (1 + |tan(elevation)|)``).
@@ -209,7 +210,7 @@ def build_angular_index(
         t_off, t_size = tree_levels(n_r)
         slot_of_az = np.full(n_az, -1, np.int32)
         old = np.empty((0, int(t_size.sum()), 2), np.float32)
-        old_start = np.empty((0, _N_SLOPE_CLASSES), np.int32)
+        old_start = np.empty((0, _N_SLOPE_CLASSES, 2), np.int32)
     new_bins = np.flatnonzero(np.asarray(want, bool) & (slot_of_az < 0))
     n_old = old.shape[0]
     if len(new_bins) == 0 and base is not None:
@@ -217,7 +218,7 @@ def build_angular_index(
     slot_of_az[new_bins] = np.arange(n_old, n_old + len(new_bins), dtype=np.int32)
     tree = np.empty((n_old + len(new_bins), int(t_size.sum()), 2), np.float32)
     tree[:n_old] = old
-    start = np.empty((n_old + len(new_bins), old_start.shape[1]), np.int32)
+    start = np.empty((n_old + len(new_bins),) + old_start.shape[1:], np.int32)
     start[:n_old] = old_start
     n_r = int(t_size[0])
     zmax = np.full((len(new_bins), n_r), -np.inf, np.float32)

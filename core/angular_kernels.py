@@ -54,6 +54,7 @@ __all__ = [
     "pseudo_angle",
     "slope_class",
     "slope_class_edge",
+    "slope_class_top",
 ]
 
 #: Slack on a patch's pseudo-angle span (p units; a bin is about 1e-3 wide).
@@ -290,16 +291,20 @@ def angular_tree_kernel(
     built from ``zmax[k]``, ``zmin[k]`` (heights, m). Level ``l`` of a slot's tree starts
     at ``t_off[l]`` and has ``t_size[l]`` nodes; node ``i`` covers leaves
     ``[i 2^l, (i + 1) 2^l)``. Bounds are rounded outwards to float32.
-    ``start[first + k, q]`` (int32) is the first leaf whose max angle reaches the lower
+    ``start[first + k, q, 0]`` (int32) is the first leaf whose max angle reaches the lower
     edge of slope class ``q`` (see :func:`slope_class`): no ray of that class can cross
-    the terrain before it.
+    the terrain before it. ``start[first + k, q, 1]`` is the last leaf whose bounds can
+    hold a slope of the class (max angle at or above its lower edge, min angle at or
+    below its upper edge), -1 if none: no ray of the class can cross after it.
     """
     n_new, n_r = zmax.shape
     top = t_off.shape[0]
     n_q = start.shape[1]
     edges = np.empty(n_q)
+    tops = np.empty(n_q)
     for q in range(n_q):
         edges[q] = slope_class_edge(q, n_q, s_unit)
+        tops[q] = slope_class_top(q, n_q, s_unit)
     for k in prange(n_new):
         tr = tree[first + k]
         for b in range(n_r):
@@ -346,7 +351,19 @@ def angular_tree_kernel(
             lo_q = edges[q]
             while b < n_r and not tr[b, 0] >= lo_q:
                 b += 1
-            start[first + k, q] = b
+            start[first + k, q, 0] = b
+        # Last leaf with max >= the lower edge (moves down as q rises) and last leaf with
+        # min <= the upper edge (moves up as q rises); the class's end is the lower one.
+        b = n_r - 1
+        for q in range(n_q):
+            while b >= 0 and not tr[b, 0] >= edges[q]:
+                b -= 1
+            start[first + k, q, 1] = b
+        b = n_r - 1
+        for q in range(n_q - 1, -1, -1):
+            while b >= 0 and not tr[b, 1] <= tops[q]:
+                b -= 1
+            start[first + k, q, 1] = min(start[first + k, q, 1], b)
 
 
 @njit(cache=True, inline="always")
@@ -364,6 +381,16 @@ def slope_class_edge(q, n_q, s_unit):  # pragma: no cover - numba
         return -np.inf
     s = s_unit * w / (1.0 - abs(w))
     return s - 1e-9 * (abs(s) + s_unit)
+
+
+@njit(cache=True, inline="always")
+def slope_class_top(q, n_q, s_unit):  # pragma: no cover - numba
+    """A slope at or above every slope of class ``q`` (its upper edge, plus a slack)."""
+    w = -1.0 + 2.0 * (q + 1) / n_q
+    if w >= 1.0:
+        return np.inf
+    s = s_unit * w / (1.0 - abs(w))
+    return s + 1e-9 * (abs(s) + s_unit)
 
 
 @njit(cache=True, inline="always")
@@ -657,11 +684,9 @@ def _angular_entry(
         return -2, 0, -1
     n_r = t_size[0]
     slope = uz / hk
-    b = max(
-        min(int(t_a * hk / d_rho), n_r - 1),
-        start[sl, slope_class(slope, start.shape[1], s_unit)],
-    )
-    b_end = min(int(t_end * hk / d_rho), n_r - 1)
+    q = slope_class(slope, start.shape[1], s_unit)
+    b = max(min(int(t_a * hk / d_rho), n_r - 1), start[sl, q, 0])
+    b_end = min(int(t_end * hk / d_rho), n_r - 1, start[sl, q, 1])
     return sl, _next_candidate(tree, sl, t_off, t_size, b, b_end, slope), b_end
 
 

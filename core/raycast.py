@@ -69,6 +69,7 @@ from .angular_index import (
     needed_azimuth_bins,
 )
 from .errors import DemError, RaycastError
+from .fresh_memory import without_huge_page_advice
 from .grid import GridSpec
 from .pyramid import MinMaxPyramid, build_pyramid
 
@@ -455,11 +456,14 @@ class RayCaster:
                 self._cast_ordered(args, first, max_hits, threads, outs)
             else:
                 indexed = self._cast_runs(args, first, max_hits, threads, runs, outs)
-            offsets = np.zeros(n + 1, np.int64)
+            with without_huge_page_advice():
+                offsets = np.empty(n + 1, np.int64)
+            offsets[0] = 0
             np.cumsum(counts, out=offsets[1:])
             m = int(offsets[-1])
-            range_m = np.empty(m, np.float64)
-            points = np.empty((m, 3), np.float64)
+            with without_huge_page_advice():
+                range_m = np.empty(m, np.float64)
+                points = np.empty((m, 3), np.float64)
             # Hits that fit the first-pass buffer are copied (with their points); the few
             # rays with more are re-walked straight into their CSR slots.
             _k.gather_hits_kernel(buf, counts, offsets, o, d, range_m, points)
@@ -630,7 +634,7 @@ def _no_index() -> SimpleNamespace:
         t_size=np.ones(1, np.int64),
         slot_of_az=np.full(4, -1, np.int32),
         d_rho=1.0,
-        start=np.zeros((1, 1), np.int32),
+        start=np.zeros((1, 1, 2), np.int32),
         s_unit=1.0,
     )
     for a in (ix.tree, ix.t_off, ix.t_size, ix.slot_of_az, ix.start):

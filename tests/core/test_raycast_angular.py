@@ -200,16 +200,22 @@ def test_tree_levels_and_query_match_linear_scan():
             assert ak.next_candidate(tr, ix.t_off, ix.t_size, b, b_end, s) == (
                 next_candidate_reference(leaves, b, b_end, s)
             )
-        # The start table: nothing before start[q] reaches the class's lower edge.
+        # The start table: nothing before start[q] reaches the class's lower edge; the
+        # end: the last leaf whose bounds meet the class's slopes.
         n_q = ix.start.shape[1]
         for q in range(0, n_q, 37):
             edge = ak.slope_class_edge(q, n_q, ix.s_unit)
-            st_q = ix.start[ix.slot_of_az[a], q]
+            top = ak.slope_class_top(q, n_q, ix.s_unit)
+            st_q, end_q = ix.start[ix.slot_of_az[a], q]
             assert np.all(leaves[:st_q, 0] < edge)
             assert st_q == ix.n_range_bins or leaves[st_q, 0] >= edge
-    for s in rng.normal(0, 3, 200):
+            meets = np.flatnonzero((leaves[:, 0] >= edge) & (leaves[:, 1] <= top))
+            assert end_q == (meets[-1] if len(meets) else -1)
+    for s in np.concatenate([rng.normal(0, 3, 200), rng.normal(0, 300, 50), [0.0]]):
         q = ak.slope_class(s, 1024, ix.s_unit)
-        assert ak.slope_class_edge(q, 1024, ix.s_unit) <= s
+        assert ak.slope_class_edge(q, 1024, ix.s_unit) <= s <= ak.slope_class_top(
+            q, 1024, ix.s_unit
+        )
 
 
 # ---------------------------------------------------------------------- exact casting
