@@ -213,8 +213,8 @@ def test_tree_levels_and_query_match_linear_scan():
             assert end_q == (meets[-1] if len(meets) else -1)
     for s in np.concatenate([rng.normal(0, 3, 200), rng.normal(0, 300, 50), [0.0]]):
         q = ak.slope_class(s, 1024, ix.s_unit)
-        assert ak.slope_class_edge(q, 1024, ix.s_unit) <= s <= ak.slope_class_top(
-            q, 1024, ix.s_unit
+        assert (
+            ak.slope_class_edge(q, 1024, ix.s_unit) <= s <= ak.slope_class_top(q, 1024, ix.s_unit)
         )
 
 
