@@ -336,6 +336,15 @@ function apiSynopsis(body) {
 }
 
 let synopsisFetch = null;
+/** Live, the server's synopsis is asked for every 3 s, or less often when answering takes
+ * the server long (20 times the last answer's duration: at most about 5 % of its time,
+ * whatever the window holds), at most every 15 s. */
+const LIVE_SYNOPSIS_POLL_MS = [3000, 15000];
+
+function liveSynopsisPollMs() {
+  const [least, most] = LIVE_SYNOPSIS_POLL_MS;
+  return Math.min(most, Math.max(least, 20 * (ui.synopsisFetchMs || 0)));
+}
 
 function drawSynopsis(t) {
   const on = $("#syn-on").checked;
@@ -349,8 +358,8 @@ function drawSynopsis(t) {
   const fresh = sameWindow && Math.abs(s.t1 - b) < 0.5 && s.version === store.version;
   const close = sameWindow && Math.abs(s.t1 - b) < 5;
   const now = performance.now();
-  // Live, the window slides all the time: ask every 3 s; after a seek, at once.
-  const wait = (timeline.live ? 3000 : 500) - (now - (ui.synopsisAt || 0));
+  // Live, the window slides all the time: ask every few seconds; after a seek, at once.
+  const wait = (timeline.live ? liveSynopsisPollMs() : 500) - (now - (ui.synopsisAt || 0));
   if (ui.synopsisApi !== null && !fresh && !synopsisFetch && wait > 0 && !ui.synopsisTimer) {
     ui.synopsisTimer = setTimeout(() => {
       ui.synopsisTimer = null;
@@ -365,6 +374,7 @@ function drawSynopsis(t) {
     if (Number.isFinite(a)) q.set("t0", String(a));
     const version = store.version;
     synopsisFetch = api.getOptionalJSON(`/api/synopsis?${q}`).then((body) => {
+      ui.synopsisFetchMs = performance.now() - now;
       const trajs = body === null ? null : apiSynopsis(body);
       if (trajs === null) ui.synopsisApi = null;
       else ui.synopsis = { t0: a, t1: b, trajs, version };
