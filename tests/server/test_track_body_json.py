@@ -107,7 +107,8 @@ def test_migration_4_moves_the_points_of_an_older_file(tmp_path):
         )
     conn.close()
     store = Store(path)
-    assert store.schema_version() == len(db.MIGRATIONS) == 4
+    assert store.schema_version() == len(db.MIGRATIONS) >= 4
+    assert store.counts()["tracks"] == 2  # counted by migration 5
     assert {t["id"]: t for t in store.tracks()} == bodies
     raw = sqlite3.connect(path).execute("SELECT body FROM tracks WHERE id = 1").fetchone()[0]
     assert "points" not in db.loads_json(raw)
