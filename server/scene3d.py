@@ -439,8 +439,13 @@ class Scene3D:
         #: Each following client's own head marker and label (client-scoped nodes).
         self._markers: dict[int, tuple[Any, Any]] = {}
         #: Clients aimed but not yet seen looking at the target: id -> (target, offset,
-        #: wall-clock time of the move, monotonic deadline). The scene thread's own.
-        self._unsettled: dict[int, tuple[np.ndarray, np.ndarray, float, float]] = {}
+        #: wall-clock time of the move, monotonic deadline or None before the client's
+        #: first report since). The scene thread's own.
+        self._unsettled: dict[int, tuple[np.ndarray, np.ndarray, float, float | None]] = {}
+        #: Wall-clock time of each client's latest move by us (kept once it settled).
+        self._aimed_at: dict[int, float] = {}
+        #: Every client's starting view (``initial_camera``: position, look-at), set with it.
+        self._home: tuple[np.ndarray, np.ndarray] | None = None
         #: Tracks drawn as followed: the broadcast's and those of sessions with a client.
         self._highlighted: set[int] = set()
         self._aim_lock = threading.Lock()
@@ -590,6 +595,7 @@ class Scene3D:
         cx, cy = 0.5 * (g.bounds[0] + g.bounds[2]), 0.5 * (g.bounds[1] + g.bounds[3])
         cam.position = (cx, cy - 0.65 * span, hi + 0.45 * span)
         cam.look_at = (cx, cy, lo)
+        self._home = (np.asarray(cam.position, float), np.asarray(cam.look_at, float))
         cam.up = (0.0, 0.0, 1.0)
         cam.near = 0.5
         cam.far = 20.0 * span
@@ -835,45 +841,61 @@ class Scene3D:
                 except Exception:  # noqa: BLE001 - a client that left meanwhile
                     log.debug("could not move client %s's camera", client.client_id)
                     offset = start
-                # viser stamps our moves with the wall clock, and each client report too
-                self._unsettled[int(client.client_id)] = (
-                    target,
-                    offset,
-                    time.time(),
-                    time.monotonic() + _SETTLE_S,
-                )
+                # viser stamps our moves with the wall clock, and each client report too;
+                # the settling time starts at the first report after this move
+                now = time.time()
+                self._unsettled[int(client.client_id)] = (target, offset, now, None)
+                self._aimed_at[int(client.client_id)] = now
 
-    def _settle(self, clients: list[Any], target: np.ndarray) -> None:
-        """Aim again those of ``clients`` whose first report since their aim missed it.
+    def _settle(self, clients: list[Any], target: np.ndarray, offset: np.ndarray) -> None:
+        """Aim again those of ``clients`` whose reports since their aim missed it.
 
         viser keeps the camera a client last reported: a report the client sent before
         our move reached it can arrive after the move and put the camera (on our side,
         and so the offset kept next) back where it was. A client is aimed again until one
-        of its reports looks at ``target`` (or :data:`_SETTLE_S` pass); from then on it is
-        left alone, so that the operator can look around.
+        of its reports looks at ``target`` (or :data:`_SETTLE_S` pass after its first
+        report since the first aim); from then on it is left alone, so that the operator
+        can look around. A client that reports the starting view (``initial_camera``)
+        after our latest move is aimed again at any time: its viewer started afresh (a
+        slow page can do so long after connecting), and no operator pan ends exactly
+        there. ``offset``: the follow's camera offset, for a client aimed afresh.
         """
         now = time.monotonic()
         for client in clients:
             cid = int(client.client_id)
-            pending = self._unsettled.get(cid)
-            if pending is None:
-                continue
-            aimed, offset, aimed_at, deadline = pending
-            if now > deadline or not np.allclose(aimed, target):
-                self._unsettled.pop(cid, None)
-                continue
             cam = client.camera
             try:
-                if cam.update_timestamp <= aimed_at:
-                    continue  # no report since our move: the camera is still ours
+                reported = cam.update_timestamp
                 looks = np.allclose(cam.look_at, target, rtol=0.0, atol=1e-3)
+                home = self._at_home(cam)
             except AssertionError:  # no report at all yet
                 continue
-            if looks:
+            if reported <= self._aimed_at.get(cid, 0.0):
+                continue  # no report since our move: the camera is still ours
+            pending = self._unsettled.get(cid)
+            if pending is not None and not np.allclose(pending[0], target):
+                self._unsettled.pop(cid, None)
+                pending = None
+            if pending is None:
+                if home and not looks:
+                    self._aim([client], target, offset, keep_offset=False)
+                continue
+            deadline = pending[3] if pending[3] is not None else now + _SETTLE_S
+            if looks or (now > deadline and not home):
                 self._unsettled.pop(cid, None)
                 continue
-            self._aim([client], target, offset, keep_offset=False)  # records a new move
+            self._aim([client], target, pending[1], keep_offset=False)  # records a new move
             self._unsettled[cid] = (*self._unsettled[cid][:3], deadline)  # the first's end
+
+    def _at_home(self, cam: Any) -> bool:
+        """Whether ``cam`` (a client's reported camera) is the starting view."""
+        if self._home is None:
+            return False
+        pos, look = self._home
+        return bool(
+            np.allclose(cam.position, pos, rtol=0.0, atol=1e-6)
+            and np.allclose(cam.look_at, look, rtol=0.0, atol=1e-6)
+        )
 
     def _mark(self, client: Any, track_id: int, target: np.ndarray) -> None:
         """Put ``client``'s own head marker and label at ``target`` (client-scoped nodes)."""
@@ -933,6 +955,8 @@ class Scene3D:
             groups.setdefault(key, []).append(client)
         for cid in [c for c in self._unsettled if c not in present]:
             del self._unsettled[cid]  # gone
+        for cid in [c for c in self._aimed_at if c not in present]:
+            del self._aimed_at[cid]
         for key, rec in list(self._follows.items()):
             pts = self._points_of(rec.track_id)
             if rec.track_id is None or pts is None:
@@ -940,7 +964,7 @@ class Scene3D:
             target = pts[-1] + [0.0, 0.0, _LIFT_M]
             first = rec.offset is None
             if not first and rec.target is not None and np.allclose(target, rec.target):
-                self._settle(groups.get(key, []), rec.target)
+                self._settle(groups.get(key, []), rec.target, rec.offset)
                 continue
             start = follow_offset(pts) if rec.offset is None else rec.offset
             rec.offset, rec.target = start, target

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import socket
+import time
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,7 @@ from scipy.spatial.transform import Rotation
 from demtrack.core.dem import Dem
 from demtrack.core.grid import GridSpec
 from demtrack.core.site import load_site
+from demtrack.server import scene3d
 from demtrack.server.messages import FixMessage, TrackUpdateMessage
 from demtrack.server.scene3d import (
     Scene3D,
@@ -499,6 +501,51 @@ def test_a_stale_camera_report_after_a_move_is_aimed_again_until_the_client_look
         assert scene.flush() and scene.flush()  # passes after the report
         np.testing.assert_allclose(client.camera.look_at, pan[1])
         np.testing.assert_allclose(client.camera.position, pan[0])
+    finally:
+        a.close()
+        scene.follow(None, session=session)
+
+
+def test_a_client_back_at_the_starting_view_is_aimed_again(scene, monkeypatch):
+    """A viewer that starts afresh (the starting view) long after its aim is aimed again.
+
+    A slow page's viser client can reset its camera to the server's initial view after it
+    settled on the followed track, or after the settling time; an operator's pan is kept.
+    """
+    monkeypatch.setattr(scene3d, "_SETTLE_S", 0.3)
+    lift = np.array([0.0, 0.0, 0.4])
+    session = "home-0123456789"
+    walk = [(-20.0, 10.0 + 4.0 * k, 2.0) for k in range(5)]
+    head = np.array(walk[-1]) + lift
+    cam0 = scene.server.initial_camera
+    home = (np.asarray(cam0.position, float), np.asarray(cam0.look_at, float))
+    a = FakeViserClient(scene.server.get_port(), f"/follow/{session}")
+    try:
+        a.send_camera(*home)  # a viewer's first report: the starting view
+        wait_for(lambda: len(scene.follow_state(session)["clients"]) == 1)
+        [client] = (c for c in scene.server.get_clients().values()
+                    if scene._client_session.get(int(c.client_id)) == session)  # fmt: skip
+        scene.follow(62, follow_body(62, walk), session=session)
+        assert scene.flush()
+        np.testing.assert_allclose(client.camera.look_at, head, atol=1e-9)
+        start = client.camera.position.copy()
+        a.send_camera(start, head)  # it looks: settled
+        wait_for(lambda: scene._unsettled.get(int(client.client_id)) is None)
+        time.sleep(0.6)  # past the settling time
+        before = client.camera.update_timestamp
+        a.send_camera(*home)  # the viewer started afresh
+        wait_for(lambda: client.camera.update_timestamp > before)  # received
+        wait_for(lambda: np.allclose(client.camera.look_at, head, atol=1e-9))
+        np.testing.assert_allclose(client.camera.position, start, atol=1e-9)
+        # An operator's pan after that is kept.
+        a.send_camera(start, head)
+        wait_for(lambda: scene._unsettled.get(int(client.client_id)) is None)
+        time.sleep(0.6)
+        pan = (start + [5.0, 0.0, 0.0], head + [5.0, 0.0, 0.0])
+        a.send_camera(*pan)
+        wait_for(lambda: np.allclose(client.camera.look_at, pan[1]))
+        assert scene.flush() and scene.flush()
+        np.testing.assert_allclose(client.camera.look_at, pan[1])
     finally:
         a.close()
         scene.follow(None, session=session)
