@@ -963,7 +963,11 @@ class Scene3D:
                 continue
             target = pts[-1] + [0.0, 0.0, _LIFT_M]
             first = rec.offset is None
-            if not first and rec.target is not None and np.allclose(target, rec.target):
+            if (
+                rec.offset is not None
+                and rec.target is not None
+                and np.allclose(target, rec.target)
+            ):
                 self._settle(groups.get(key, []), rec.target, rec.offset)
                 continue
             start = follow_offset(pts) if rec.offset is None else rec.offset
