@@ -439,9 +439,9 @@ class Scene3D:
         #: Each following client's own head marker and label (client-scoped nodes).
         self._markers: dict[int, tuple[Any, Any]] = {}
         #: Clients aimed but not yet seen looking at the target: id -> (target, offset,
-        #: wall-clock time of the move, monotonic deadline or None before the client's
-        #: first report since). The scene thread's own.
-        self._unsettled: dict[int, tuple[np.ndarray, np.ndarray, float, float | None]] = {}
+        #: monotonic deadline or None before the client's first report since the move;
+        #: the move's time is in ``_aimed_at``). The scene thread's own.
+        self._unsettled: dict[int, tuple[np.ndarray, np.ndarray, float | None]] = {}
         #: Wall-clock time of each client's latest move by us (kept once it settled).
         self._aimed_at: dict[int, float] = {}
         #: Every client's starting view (``initial_camera``: position, look-at), set with it.
@@ -843,9 +843,8 @@ class Scene3D:
                     offset = start
                 # viser stamps our moves with the wall clock, and each client report too;
                 # the settling time starts at the first report after this move
-                now = time.time()
-                self._unsettled[int(client.client_id)] = (target, offset, now, None)
-                self._aimed_at[int(client.client_id)] = now
+                self._unsettled[int(client.client_id)] = (target, offset, None)
+                self._aimed_at[int(client.client_id)] = time.time()
 
     def _settle(self, clients: list[Any], target: np.ndarray, offset: np.ndarray) -> None:
         """Aim again those of ``clients`` whose reports since their aim missed it.
@@ -880,12 +879,12 @@ class Scene3D:
                 if home and not looks:
                     self._aim([client], target, offset, keep_offset=False)
                 continue
-            deadline = pending[3] if pending[3] is not None else now + _SETTLE_S
+            deadline = pending[2] if pending[2] is not None else now + _SETTLE_S
             if looks or (now > deadline and not home):
                 self._unsettled.pop(cid, None)
                 continue
             self._aim([client], target, pending[1], keep_offset=False)  # records a new move
-            self._unsettled[cid] = (*self._unsettled[cid][:3], deadline)  # the first's end
+            self._unsettled[cid] = (*self._unsettled[cid][:2], deadline)  # the first's end
 
     def _at_home(self, cam: Any) -> bool:
         """Whether ``cam`` (a client's reported camera) is the starting view."""
