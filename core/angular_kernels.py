@@ -374,23 +374,28 @@ def slope_class(s, n_q, s_unit):  # pragma: no cover - numba
 
 
 @njit(cache=True, inline="always")
+def _class_boundary(q, n_q, s_unit, side):  # pragma: no cover - numba
+    """The slope where class ``q`` begins, moved by a slack to ``side`` (-1 or +1).
+
+    ``±inf`` beyond the outermost boundaries (``w = ±1``).
+    """
+    w = -1.0 + 2.0 * q / n_q
+    if abs(w) >= 1.0:
+        return w * np.inf
+    s = s_unit * w / (1.0 - abs(w))
+    return s + side * 1e-9 * (abs(s) + s_unit)
+
+
+@njit(cache=True, inline="always")
 def slope_class_edge(q, n_q, s_unit):  # pragma: no cover - numba
     """A slope at or below every slope of class ``q`` (its lower edge, less a slack)."""
-    w = -1.0 + 2.0 * q / n_q
-    if w <= -1.0:
-        return -np.inf
-    s = s_unit * w / (1.0 - abs(w))
-    return s - 1e-9 * (abs(s) + s_unit)
+    return _class_boundary(q, n_q, s_unit, -1.0)
 
 
 @njit(cache=True, inline="always")
 def slope_class_top(q, n_q, s_unit):  # pragma: no cover - numba
     """A slope at or above every slope of class ``q`` (its upper edge, plus a slack)."""
-    w = -1.0 + 2.0 * (q + 1) / n_q
-    if w >= 1.0:
-        return np.inf
-    s = s_unit * w / (1.0 - abs(w))
-    return s + 1e-9 * (abs(s) + s_unit)
+    return _class_boundary(q + 1, n_q, s_unit, 1.0)
 
 
 @njit(cache=True, inline="always")
