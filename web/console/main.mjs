@@ -286,6 +286,12 @@ function clipTrack(tr, a, b) {
   return { ...tr, points, gaps: (tr.gaps || []).filter(([g0, g1]) => g1 >= a && g0 <= b) };
 }
 
+/** How often (ms) to redo a job that took costMs: 20 times its cost (about 5 % of the
+ * time), within [least, most]. */
+function refreshEveryMs([least, most], costMs) {
+  return Math.min(most, Math.max(least, 20 * costMs));
+}
+
 let localCache = null;
 /** How often (ms) the page's own synopsis follows a sliding window or new data: once a
  * second, or less often when drawing it takes more than 5 % of that (at most every 5 s). */
@@ -306,8 +312,7 @@ function localSynopsis(a, b) {
   const span = b - a;
   const sameSpan = c && (c.b - c.a === span || (!Number.isFinite(span) && !Number.isFinite(c.b - c.a)));
   const slide = c ? Math.abs(b - c.b) : Infinity;
-  const [least, most] = LOCAL_SYNOPSIS_REFRESH_MS;
-  const every = Math.min(most, Math.max(least, 20 * ui.map.synopsisRenderMs));
+  const every = refreshEveryMs(LOCAL_SYNOPSIS_REFRESH_MS, ui.map.synopsisRenderMs);
   if (sameSpan && now - c.at < every && slide <= Math.max(30, 0.05 * span)) return c.trajs;
   const trajs = computeLocalSynopsis(a, b);
   localCache = { a, b, version: store.version, at: now, trajs };
@@ -341,11 +346,6 @@ let synopsisFetch = null;
  * whatever the window holds), at most every 15 s. */
 const LIVE_SYNOPSIS_POLL_MS = [3000, 15000];
 
-function liveSynopsisPollMs() {
-  const [least, most] = LIVE_SYNOPSIS_POLL_MS;
-  return Math.min(most, Math.max(least, 20 * (ui.synopsisFetchMs || 0)));
-}
-
 function drawSynopsis(t) {
   const on = $("#syn-on").checked;
   ui.map.synopsis.setVisible(on && layerChecked("synopsis"));
@@ -359,7 +359,8 @@ function drawSynopsis(t) {
   const close = sameWindow && Math.abs(s.t1 - b) < 5;
   const now = performance.now();
   // Live, the window slides all the time: ask every few seconds; after a seek, at once.
-  const wait = (timeline.live ? liveSynopsisPollMs() : 500) - (now - (ui.synopsisAt || 0));
+  const every = timeline.live ? refreshEveryMs(LIVE_SYNOPSIS_POLL_MS, ui.synopsisFetchMs || 0) : 500;
+  const wait = every - (now - (ui.synopsisAt || 0));
   if (ui.synopsisApi !== null && !fresh && !synopsisFetch && wait > 0 && !ui.synopsisTimer) {
     ui.synopsisTimer = setTimeout(() => {
       ui.synopsisTimer = null;
