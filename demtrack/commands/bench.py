@@ -1,4 +1,4 @@
-"""``demtrack bench raycast|viewshed|server|console-soak``: benchmarks (peers, server, console)."""
+"""``demtrack bench raycast|viewshed|server|pipeline|console-soak``: peers, server, console."""
 
 from __future__ import annotations
 
@@ -8,9 +8,14 @@ __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
-    from demtrack.bench import raycast, server_bench, viewshed
+    from demtrack.bench import pipeline_replay, raycast, server_bench, viewshed
 
-    jobs = {"raycast": raycast.main, "viewshed": viewshed.main, "server": server_bench.main}
+    jobs = {
+        "raycast": raycast.main,
+        "viewshed": viewshed.main,
+        "server": server_bench.main,
+        "pipeline": pipeline_replay.main,
+    }
     if args.bench == "console-soak":  # Playwright is imported only for this one
         from demtrack.bench import console_soak
 
@@ -33,6 +38,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "server", help="console ingest rate and WebSocket fan-out latency", add_help=False
     )
     s.set_defaults(func=_run)
+    pl = bsub.add_parser(
+        "pipeline",
+        help="the console soak's server work in-process: CPU per detection",
+        add_help=False,
+    )
+    pl.set_defaults(func=_run)
     c = bsub.add_parser(
         "console-soak",
         help="the console in Chromium over a long replay at 10x with about 20 tracks",
