@@ -193,3 +193,7 @@ def main(argv: list[str] | None = None) -> int:
         " HTTP, the stream, the page's polls and a browser on the same cores)"
     )
     return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -21,6 +21,34 @@ from .errors import InputFileError
 __all__ = ["RoadCandidate", "RoadChoices", "RoadNetwork"]
 
 
+def _clip_to_box(
+    start: np.ndarray, stop: np.ndarray, box: tuple[float, float, float, float]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Segments ``start -> stop`` (k, 2) clipped to ``box`` (Liang-Barsky).
+
+    Returns the clipped ends and a mask of the segments that touch the box (the ends
+    of the others are meaningless). A segment inside the box is returned bit for bit.
+    """
+    lo = np.array(box[:2])
+    hi = np.array(box[2:])
+    step = stop - start
+    t0 = np.zeros(len(start))
+    t1 = np.ones(len(start))
+    inside = np.ones(len(start), bool)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for a in range(2):
+            flat = step[:, a] == 0.0
+            inside &= ~flat | ((start[:, a] >= lo[a]) & (start[:, a] <= hi[a]))
+            ta = (lo[a] - start[:, a]) / step[:, a]
+            tb = (hi[a] - start[:, a]) / step[:, a]
+            t0 = np.where(flat, t0, np.maximum(t0, np.minimum(ta, tb)))
+            t1 = np.where(flat, t1, np.minimum(t1, np.maximum(ta, tb)))
+    over = inside & (t0 <= t1)
+    new_start = np.where((t0 > 0.0)[:, None], start + t0[:, None] * step, start)
+    new_stop = np.where((t1 < 1.0)[:, None], start + t1[:, None] * step, stop)
+    return new_start, new_stop, over
+
+
 @dataclass(frozen=True)
 class RoadCandidate:
     """One crossing of a viewing ray's ground track with a road centre line.
@@ -245,11 +273,21 @@ class RoadNetwork:
         horiz = np.hypot(d[:, 0], d[:, 1])
         rays = np.flatnonzero(horiz >= 1e-9)  # straight down: the ground track is a point
         end = o[rays] + d[rays] * cutoff_m
-        tracks = shapely.linestrings(np.stack([o[rays, :2], end[:, :2]], axis=1))
+        # Only the part of each ground track over the DEM can give a crossing (the
+        # elevation is NaN elsewhere): clipped to it, a track meets fewer road segments.
+        # The box is the DEM's surface padded by a cell, so a clipped end is off the
+        # surface and no crossing on it is lost; ranges are still from the ray's origin.
+        x0, y0, x1, y1 = dem.grid.centre_bounds
+        pad = dem.grid.cell_m
+        start, stop, over = _clip_to_box(
+            o[rays, :2], end[:, :2], (x0 - pad, y0 - pad, x1 + pad, y1 + pad)
+        )
+        rays, start, stop = rays[over], start[over], stop[over]
+        tracks = shapely.linestrings(np.stack([start, stop], axis=1))
         pair_track, pair_seg = self._segment_tree.query(tracks)  # bounding boxes only
         if len(pair_track) == 0:
             return out
-        xy, which = self._crossings(o[rays[pair_track], :2], end[pair_track, :2], pair_seg)
+        xy, which = self._crossings(start[pair_track], stop[pair_track], pair_seg)
         if len(which) == 0:
             return out
         ray = rays[pair_track[which]]

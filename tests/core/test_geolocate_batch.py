@@ -307,3 +307,36 @@ def test_centre_shift_without_masks_equals_the_masked_arithmetic():
     np.testing.assert_array_equal(shift[1:], masked[0][1:])
     hits0 = ray == 0
     np.testing.assert_array_equal(cov_out[hits0], cov[hits0] + var_across[0] * np.eye(2))
+
+
+def test_bulk_road_rule_for_rays_from_off_the_dem_equals_the_scalar_rule(site):
+    """Ground tracks clipped to the DEM: rays entering it from outside, leaving it, or
+    passing it by give the scalar rule's answer (it intersects the whole track)."""
+    rng = np.random.default_rng(7)
+    roads, dem = site.roads, site.dem
+    x0, y0, x1, y1 = dem.grid.centre_bounds
+    n = 400
+    # origins on a ring 50-400 m outside the DEM, aimed at random points around it
+    ang = rng.uniform(0, 2 * np.pi, n)
+    rad = 0.5 * max(x1 - x0, y1 - y0) + rng.uniform(50, 400, n)
+    cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+    o = np.column_stack([cx + rad * np.cos(ang), cy + rad * np.sin(ang), rng.uniform(30, 120, n)])
+    aim = np.column_stack(
+        [rng.uniform(x0 - 100, x1 + 100, n), rng.uniform(y0 - 100, y1 + 100, n), np.zeros(n)]
+    )
+    aim[:, 2] = np.nan_to_num(dem.sample(aim[:, 0], aim[:, 1]), nan=float(np.nanmin(dem.elevation)))
+    d = aim - o
+    d[:10, :2] = 0.0  # straight down, off the DEM
+    d[10:20] = np.column_stack(
+        [-(o[10:20, :2] - [cx, cy]), np.full(10, -1.0)]
+    )  # through the middle
+    d[20:30, 2] = 0.0  # level
+    got = roads.best_candidates(o, d, dem, 2000.0, 3.0)
+    assert got.found.sum() > 20 and (~got.found).sum() > 20
+    for i in range(n):
+        want = roads.best_candidate(o[i], d[i], dem, 2000.0, 3.0)
+        assert got.found[i] == (want is not None), i
+        if want is not None:
+            np.testing.assert_allclose(got.p_enu[i], want.p_enu, rtol=0, atol=1e-9)
+            assert got.vertical_gap_m[i] == pytest.approx(want.vertical_gap_m, abs=1e-9)
+            assert got.road_index[i] == want.road_index

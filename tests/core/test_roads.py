@@ -233,3 +233,43 @@ def test_names_or_widths_of_the_wrong_length_are_rejected():
         RoadNetwork.from_coordinates([seg, seg + 1], names=["only one"])
     with pytest.raises(InputFileError, match="widths"):
         RoadNetwork.from_coordinates([seg], widths_m=[5.0, 6.0])
+
+
+def test_clipping_to_a_box_keeps_exactly_the_part_inside():
+    from demtrack.core.roads import _clip_to_box
+
+    rng = np.random.default_rng(3)
+    box = (-10.0, -5.0, 20.0, 15.0)
+    start = rng.uniform(-40, 50, (2000, 2))
+    stop = rng.uniform(-40, 50, (2000, 2))
+    stop[:50, 0] = start[:50, 0]  # vertical
+    stop[50:100, 1] = start[50:100, 1]  # horizontal
+    stop[100:110] = start[100:110]  # a point
+    inside = rng.uniform([-10, -5], [20, 15], (100, 2))
+    start[110:160], stop[110:160] = inside[:50], inside[50:]  # wholly inside: unchanged
+    a, b, over = _clip_to_box(start, stop, box)
+    assert np.array_equal(a[110:160], start[110:160]) and np.array_equal(b[110:160], stop[110:160])
+    ts = np.linspace(0.0, 1.0, 401)
+    for k in range(len(start)):
+        pts = start[k] + ts[:, None] * (stop[k] - start[k])
+        ok = (
+            (pts[:, 0] >= box[0])
+            & (pts[:, 0] <= box[2])
+            & (pts[:, 1] >= box[1])
+            & (pts[:, 1] <= box[3])
+        )
+        if not over[k]:
+            assert not ok.any(), k
+            continue
+        seg = (
+            shapely.LineString([start[k], stop[k]])
+            if not np.array_equal(start[k], stop[k])
+            else None
+        )
+        clipped = shapely.box(*box).intersection(seg) if seg is not None else None
+        for p in (a[k], b[k]):  # ends inside the box (to rounding), on the segment
+            assert box[0] - 1e-9 <= p[0] <= box[2] + 1e-9 and box[1] - 1e-9 <= p[1] <= box[3] + 1e-9
+            if seg is not None:
+                assert seg.distance(shapely.Point(p)) < 1e-9
+        if clipped is not None and not clipped.is_empty and clipped.length > 0:
+            assert np.hypot(*(b[k] - a[k])) == pytest.approx(clipped.length, abs=1e-9)
