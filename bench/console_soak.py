@@ -8,7 +8,9 @@ headless Chromium before the first frame, so everything it shows arrives on the 
 Every ``--every`` wall seconds it samples:
 
 - the page: JS heap after a forced GC and DOM nodes (CDP ``Performance.getMetrics``),
-  animation frames per second and main-thread script time since the last sample, the
+  animation frames and map redraws per second and main-thread script time since the last
+  sample, the CPU of Chromium and the Playwright driver (psutil, this process's other
+  children), the
   features of the live-tracks layer (trails and head dots), the store's sizes (tracks,
   points, fixes, events), the stream's received messages and sequence gaps, WebSocket
   (re)connections;
@@ -92,6 +94,7 @@ _STATE_JS = """async () => {
     nTracks: document.querySelector("#n-tracks")?.textContent || "",
     conn: document.querySelector("#conn")?.dataset.state || "",
     frames: window.__soak ? window.__soak.frames : 0,
+    redraws: d.ui ? d.ui.redraws : 0,
     longTasks: window.__soak ? window.__soak.longTasks : 0,
     longMs: window.__soak ? window.__soak.longMs : 0,
   };
@@ -113,6 +116,7 @@ class Sample:
     heap_mb: float
     nodes: int
     fps: float
+    redraws_per_s: float
     script_frac: float
     long_tasks: int
     trails: int
@@ -133,6 +137,7 @@ class Sample:
     server_rss_mb: float
     server_cpu_frac: float
     server_wait_frac: float
+    browser_cpu_frac: float
 
 
 def page_state(page: Any) -> dict[str, Any]:
@@ -183,6 +188,24 @@ def _server_usage(pid: int) -> tuple[float, float, float]:
     proc = psutil.Process(pid)
     cpu = proc.cpu_times()
     return proc.memory_info().rss / 1e6, cpu.user + cpu.system, wait
+
+
+def _browser_cpu_s(server_pid: int) -> float:
+    """CPU time (s) of this process's descendants but the server: Playwright and Chromium."""
+    try:
+        import psutil
+    except ImportError:
+        return math.nan
+    total = 0.0
+    for child in psutil.Process().children(recursive=True):
+        try:
+            if child.pid == server_pid or server_pid in {p.pid for p in child.parents()}:
+                continue
+            cpu = child.cpu_times()
+            total += cpu.user + cpu.system
+        except psutil.Error:  # a process that just ended
+            continue
+    return total
 
 
 def replay_server(
@@ -256,6 +279,7 @@ def _soak(args: argparse.Namespace, site: Path, tmp: Path) -> tuple[list[Sample]
                 st = page_state(page)
                 wall = time.monotonic() - w0
                 rss, cpu, waited = _server_usage(server.pid)
+                browser_cpu = _browser_cpu_s(server.pid)
                 status = api.get("/api/status").json()["counts"]
                 t_rel = float(st["tMax"]) - t0
                 recent = api.get("/api/tracks", params={"t_from": float(st["tMax"]) - 2.0})
@@ -263,6 +287,8 @@ def _soak(args: argparse.Namespace, site: Path, tmp: Path) -> tuple[list[Sample]
                 cur = {
                     "wall": wall,
                     "frames": st["frames"],
+                    "redraws": st["redraws"],
+                    "browser_cpu": browser_cpu,
                     "script": m.get("ScriptDuration", 0.0),
                     "cpu": cpu,
                     "wait": waited,
@@ -279,6 +305,9 @@ def _soak(args: argparse.Namespace, site: Path, tmp: Path) -> tuple[list[Sample]
                         heap_mb=m["JSHeapUsedSize"] / 1e6,
                         nodes=int(m["Nodes"]),
                         fps=(st["frames"] - prev["frames"]) / d_wall if prev else math.nan,
+                        redraws_per_s=(st["redraws"] - prev["redraws"]) / d_wall
+                        if prev
+                        else math.nan,
                         script_frac=(cur["script"] - prev["script"]) / d_wall if prev else math.nan,
                         long_tasks=int(st["longTasks"]),
                         trails=st["trails"],
@@ -301,6 +330,9 @@ def _soak(args: argparse.Namespace, site: Path, tmp: Path) -> tuple[list[Sample]
                         # a thread that ended takes its wait along: NaN rather than < 0
                         server_wait_frac=(waited - prev["wait"]) / d_wall
                         if prev and waited >= prev["wait"]
+                        else math.nan,
+                        browser_cpu_frac=(browser_cpu - prev["browser_cpu"]) / d_wall
+                        if prev
                         else math.nan,
                     )
                 )
@@ -338,7 +370,8 @@ def _replay_ended(samples: list[Sample], quiet: int = 2) -> bool:
 _HEAD = (
     f"{'wall s':>7} {'scen s':>7} {'pace':>5} {'lag s':>6} {'det/s':>6} {'api':>4} {'live':>4}"
     f" {'heads':>5} {'store':>5} {'points':>7} {'fixes':>5} {'heap MB':>7} {'nodes':>6}"
-    f" {'fps':>5} {'js %':>5} {'srv MB':>7} {'srv %':>5} {'wait %':>6} {'gaps':>4} {'ws':>3}"
+    f" {'fps':>5} {'rdr/s':>5} {'js %':>5} {'brw %':>5} {'srv MB':>7} {'srv %':>5} {'wait %':>6}"
+    f" {'gaps':>4} {'ws':>3}"
 )
 
 
@@ -346,7 +379,8 @@ def _row(s: Sample) -> str:
     return (
         f"{s.wall_s:7.0f} {s.t_s:7.0f} {s.pace:5.1f} {s.lag_s:6.0f} {s.det_per_s:6.0f}"
         f" {s.api_recent:4d} {s.api_live:4d} {s.heads:5d} {s.tracks:5d} {s.points:7d}"
-        f" {s.fixes:5d} {s.heap_mb:7.1f} {s.nodes:6d} {s.fps:5.1f} {100 * s.script_frac:5.1f}"
+        f" {s.fixes:5d} {s.heap_mb:7.1f} {s.nodes:6d} {s.fps:5.1f} {s.redraws_per_s:5.1f}"
+        f" {100 * s.script_frac:5.1f} {100 * s.browser_cpu_frac:5.0f}"
         f" {s.server_rss_mb:7.1f} {100 * s.server_cpu_frac:5.0f} {100 * s.server_wait_frac:6.0f}"
         f" {s.gaps:4d} {s.ws_opened:3d}"
     )
@@ -408,8 +442,10 @@ def verdict(samples: list[Sample], final: dict[str, Any], args: argparse.Namespa
         f" {final.get('maxPoints')}), {final.get('fixes')} fixes, {final.get('events')} events:"
         f" {'within' if caps_ok else 'OVER'} the caps {json.dumps(limits)}",
         f"page: {mean(fps):.1f} frames/s mean, {min(fps, default=math.nan):.1f} worst interval;"
+        f" {nanmean([s.redraws_per_s for s in samples]):.1f} map redraws/s;"
         f" {last.long_tasks} long tasks (> 50 ms); main-thread script"
-        f" {100 * mean([s.script_frac for s in samples[1:]]):.0f} % of wall time",
+        f" {100 * mean([s.script_frac for s in samples[1:]]):.0f} % of wall time; Chromium and"
+        f" Playwright {100 * nanmean([s.browser_cpu_frac for s in samples]):.0f} % of a core",
     ]
 
 

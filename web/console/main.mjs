@@ -33,6 +33,7 @@ const ui = {
   filters: { classes: new Set(["vehicle", "human"]), sensors: null, ids: null },
   filterVersion: 0, // bumped on every filter change (what the drawn synopsis was filtered by)
   dirty: true,
+  redraws: 0,
   lastVersion: -1,
   lastT: null,
   events: [],
@@ -226,6 +227,7 @@ function frame(nowMs) {
   const t = timeline.now();
   if (moved || ui.dirty || store.version !== ui.lastVersion || t !== ui.lastT) {
     ui.dirty = false;
+    ui.redraws += 1; // counted for the soak benchmark
     ui.lastVersion = store.version;
     ui.lastT = t;
     timeline.sync();
