@@ -19,6 +19,7 @@ import tempfile
 from pathlib import Path
 
 from .console_harness import ServeProcess, launch_chromium
+from .sample_site import site_or_sample
 
 __all__ = ["main"]
 
@@ -50,11 +51,7 @@ def main(argv: list[str] | None = None) -> int:
     from playwright.sync_api import sync_playwright
 
     with tempfile.TemporaryDirectory() as tmp:
-        site = args.site
-        if site is None:
-            from demtrack.samplesite.build import build_sample_site
-
-            site = build_sample_site(Path(tmp) / "site")
+        site = site_or_sample(args.site, Path(tmp))
         server = ServeProcess(site, Path(tmp) / "bench.sqlite3", _TOKEN).start()
         try:
             n_tracks = _ingest(site, server, args.scenario)

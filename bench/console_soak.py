@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from .console_harness import ServeProcess, launch_chromium
+from .sample_site import SOAK_SCENARIOS, site_or_sample
 
 __all__ = [
     "PROBE_INIT_JS",
@@ -52,7 +53,7 @@ __all__ = [
     "slope",
 ]
 
-SCENARIOS = ("vehicle-run", "pedestrians", "passing-vehicles")
+SCENARIOS = SOAK_SCENARIOS
 _TOKEN = "bench-console-soak-token"
 
 #: Installed before the page's own scripts: counts animation frames and long tasks.
@@ -466,11 +467,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--screenshot", type=Path, default=None, help="save the page here at the end")
     args = p.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
-        site = args.site
-        if site is None:
-            from demtrack.samplesite.build import build_sample_site
-
-            site = build_sample_site(Path(tmp) / "site")
+        site = site_or_sample(args.site, Path(tmp))
         print(
             f"console soak: {', '.join(SCENARIOS)} x {args.copies} copies, {args.rate_hz:g} Hz"
             f" cameras, {args.duration:g} s of scenario time at {args.speed:g}x"

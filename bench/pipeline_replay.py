@@ -28,10 +28,9 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-__all__ = ["CpuMeter", "main", "replay_in_process"]
+from .sample_site import SOAK_SCENARIOS, site_or_sample
 
-#: The scenarios the soak and ``demtrack demo`` replay.
-SCENARIOS = ("vehicle-run", "pedestrians", "passing-vehicles")
+__all__ = ["CpuMeter", "main", "replay_in_process"]
 
 
 class CpuMeter:
@@ -99,7 +98,7 @@ def replay_in_process(args: argparse.Namespace, site_dir: Path, db: Path) -> lis
     pipeline.start()
     frames = iter(
         scenario_stream(
-            site, list(SCENARIOS), 0.0, loop=True, copies=args.copies, rate_hz=args.rate_hz
+            site, list(SOAK_SCENARIOS), 0.0, loop=True, copies=args.copies, rate_hz=args.rate_hz
         )
     )
     gc.collect()
@@ -168,13 +167,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.duration <= 0 or args.every <= 0 or args.coalesce < 1 or args.copies < 1:
         p.error("--duration, --every, --coalesce and --copies must be positive")
     with tempfile.TemporaryDirectory(prefix="demtrack-pipeline-") as tmp:
-        site_dir = args.site
-        if site_dir is None:
-            from demtrack.samplesite.build import build_sample_site
-
-            site_dir = build_sample_site(Path(tmp) / "site")
+        site_dir = site_or_sample(args.site, Path(tmp))
         print(
-            f"pipeline replay: {', '.join(SCENARIOS)} x {args.copies} copies, "
+            f"pipeline replay: {', '.join(SOAK_SCENARIOS)} x {args.copies} copies, "
             f"{args.rate_hz:g} Hz cameras, {args.coalesce} frames per batch, in-process"
         )
         print(" scen s     det   us/det  gc %  tx % gc objects")

@@ -45,6 +45,8 @@ from typing import Any
 
 import numpy as np
 
+from .sample_site import site_or_sample
+
 __all__ = ["frame_batches", "main", "scenario_records"]
 
 _TOKEN = "bench-operator-token"
@@ -244,12 +246,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rate", type=float, default=20.0, help="fan-out batches per second")
     args = p.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
-        site = args.site
-        if site is None:
-            from demtrack.samplesite.build import build_sample_site
-
-            print("building the sample site ...", flush=True)
-            site = build_sample_site(Path(tmp) / "site")
+        site = site_or_sample(args.site, Path(tmp), announce=True)
         both = scenario_records(site, 2 * args.detections)
         recs, later = both[: args.detections], both[args.detections :]
         batches = [recs[i : i + args.batch] for i in range(0, len(recs), args.batch)]
