@@ -69,6 +69,16 @@ def scene(site):
     sc.stop()
 
 
+@pytest.fixture(autouse=True)
+def _clients_of_earlier_tests_gone(request):
+    """A test on the shared scene starts once the viser clients of the tests before it have
+    left: the server lists a closed client a moment longer, and a test that waits for "one
+    client" could otherwise take that one for its own (CI once saw exactly this)."""
+    if "scene" in request.fixturenames:
+        sc = request.getfixturevalue("scene")
+        wait_for(lambda: not sc.server.get_clients())
+
+
 def test_static_scene_has_terrain_cameras_and_roads(scene, site):
     names = set(scene.nodes)
     assert {"/terrain", "/roads"} <= names
