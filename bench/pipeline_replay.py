@@ -13,7 +13,7 @@ collector tracks; then the rate one core sustains against the rate 10x needs. Th
 is the same in every run, so two versions of the code compare in a minute or two.
 
 Run: ``python -m demtrack.bench.pipeline_replay [--site DIR] [--duration 600] [--copies 4]
-[--rate-hz 10] [--coalesce 30] [--every 100]`` (``demtrack bench pipeline``).
+[--rate-hz 10] [--coalesce 60] [--every 100]`` (``demtrack bench pipeline``).
 """
 
 from __future__ import annotations
@@ -160,7 +160,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--duration", type=float, default=600.0, help="scenario seconds (600)")
     p.add_argument("--copies", type=int, default=4, help="copies of each scenario (4)")
     p.add_argument("--rate-hz", type=float, default=10.0, help="camera frame rate (10)")
-    p.add_argument("--coalesce", type=int, default=30, help="replay frames per batch (30)")
+    p.add_argument(
+        "--coalesce",
+        type=int,
+        default=60,
+        help="replay frames per batch (60: what the server's 0.1 s batches hold at 10x)",
+    )
     p.add_argument("--every", type=float, default=100.0, help="scenario seconds per row (100)")
     p.add_argument("--speed", type=float, default=10.0, help="the replay speed to compare with")
     args = p.parse_args(argv)

@@ -172,6 +172,7 @@ def _start_replay(
         frames,
         pipeline.ingest,
         speed=settings.replay_speed,
+        min_interval_s=settings.replay_batch_s,
     )
     log.info("replaying %s from t = %.0f s at %g x", ", ".join(names), t0, settings.replay_speed)
     return replay.start()

@@ -65,6 +65,11 @@ class Settings(BaseSettings):
         The replayed cameras' frame rate (Hz).
     replay_duration_s : float
         Stop the replay after this much scenario time (s); 0 for no end.
+    replay_batch_s : float
+        The replay sends the frames that fell due at most this often (wall seconds), as a
+        camera gateway buffering that long would; 0 sends each frame as soon as it is due.
+        A batch's cost is largely fixed, so at 10x the default cuts the server's CPU per
+        detection by about a third (see docs/benchmarks.md).
     scene3d : bool
         Serve the viser 3D scene on its own port.
     viser_host : str
@@ -122,6 +127,7 @@ class Settings(BaseSettings):
     replay_copies: int = Field(default=1, ge=1, le=100)
     replay_rate_hz: float = Field(default=10.0, gt=0, le=100, allow_inf_nan=False)
     replay_duration_s: float = Field(default=0.0, ge=0, allow_inf_nan=False)
+    replay_batch_s: float = Field(default=0.1, ge=0, le=10, allow_inf_nan=False)
     scene3d: bool = False
     viser_host: str = "127.0.0.1"
     viser_port: int = Field(default=8080, ge=0, le=65535)

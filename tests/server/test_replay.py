@@ -102,6 +102,33 @@ def test_replay_sends_everything_in_order_and_stops():
     assert replay.n_batches == len(got) <= 200
 
 
+def test_replay_batches_the_frames_due_within_its_interval():
+    # 2 s of frames every 10 ms at 1x, sent at most every 0.25 s: the frames that fall due
+    # in between wait and go together, none before it is due, all in order.
+    frames = [ReplayFrame(0.01 * k, "cam1", ({"t": 0.01 * k},)) for k in range(200)]
+    sends: list[tuple[float, list[dict]]] = []
+    replay = Replay(
+        lambda: frames,
+        lambda recs: sends.append((time.monotonic(), recs)) or {"accepted": len(recs)},
+        min_interval_s=0.25,
+    )
+    t_start = time.monotonic()
+    replay.start()
+    wait_done(replay, 30.0)
+    assert replay.stop() and replay.error is None
+    assert [r["t"] for _, recs in sends for r in recs] == [f.t_s for f in frames]
+    times = [t for t, _ in sends]
+    assert all(b - a >= 0.25 for a, b in itertools.pairwise(times))
+    assert all(t - t_start >= recs[-1]["t"] for t, recs in sends)  # nothing sent early
+    assert 2 <= replay.n_batches <= 9 and replay.n_frames == 200
+
+
+@pytest.mark.parametrize("bad", [-0.1, float("nan"), float("inf")])
+def test_replay_batch_interval_must_be_a_number_of_seconds(bad):
+    with pytest.raises(ValueError, match="batch interval"):
+        Replay(list, print, min_interval_s=bad)
+
+
 def test_replay_paces_at_speed_and_stops_while_waiting():
     endless = (ReplayFrame(float(k), "cam1", ({"t": float(k)},)) for k in itertools.count())
     got: list[list[dict]] = []
@@ -154,6 +181,7 @@ def test_replayed_tracks_follow_the_scenario_truth(sample_site_dir, tmp_path):
     )
     with TestClient(app) as client:
         replay = app.state.replay
+        assert replay.min_interval_s == app.state.settings.replay_batch_s == 0.1
         wait_done(replay)
         assert replay.n_records == len(scenario.detections) == replay.n_accepted
         tracks = client.get("/api/tracks", headers=AUTH).json()["tracks"]

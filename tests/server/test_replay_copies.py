@@ -67,8 +67,14 @@ def test_settings_carry_the_replay_options(sample_site_dir, tmp_path, monkeypatc
     monkeypatch.setenv("DEMTRACK_REPLAY_COPIES", "4")
     monkeypatch.setenv("DEMTRACK_REPLAY_RATE_HZ", "2.5")
     monkeypatch.setenv("DEMTRACK_REPLAY_DURATION_S", "60")
+    monkeypatch.setenv("DEMTRACK_REPLAY_BATCH_S", "0.25")
     s = make_app(sample_site_dir, tmp_path).state.settings
     assert (s.replay_copies, s.replay_rate_hz, s.replay_duration_s) == (4, 2.5, 60.0)
+    assert s.replay_batch_s == 0.25
+    monkeypatch.setenv("DEMTRACK_REPLAY_BATCH_S", "-1")
+    with pytest.raises(ValueError, match="replay_batch_s"):
+        make_app(sample_site_dir, tmp_path)
+    monkeypatch.delenv("DEMTRACK_REPLAY_BATCH_S")
     monkeypatch.setenv("DEMTRACK_REPLAY_COPIES", "0")
     with pytest.raises(ValueError, match="replay_copies"):
         make_app(sample_site_dir, tmp_path)
