@@ -523,6 +523,8 @@ def _walk_cells(
     kx,
     ky,
     uz,
+    ikx,
+    iky,
     t1,
     t2,
     hits,
@@ -537,7 +539,8 @@ def _walk_cells(
 
     The per-patch work is exactly that of ``raycast_kernels._walk`` at level 0 (same
     tests, same solver, same acceptance window and de-duplication), continuing the
-    ray's ``count`` and ``last_t``. Returns ``(count, crossed, last_t, stop)``.
+    ray's ``count`` and ``last_t``. ``ikx, iky``: :func:`_ray_terms`'. Returns
+    ``(count, crossed, last_t, stop)``.
     """
     nrows, ncols = elev.shape
     pcols = ncols - 1
@@ -548,8 +551,6 @@ def _walk_cells(
     fy = 1 if ky > 0.0 else 0
     sx = 1 if kx > 0.0 else -1
     sy = 1 if ky > 0.0 else -1
-    ikx = 1.0 / kx if kx != 0.0 else 0.0
-    iky = 1.0 / ky if ky != 0.0 else 0.0
     dtx = abs(ikx)
     dty = abs(iky)
     tmx = ((nx + fx) - gx0) * ikx if kx != 0.0 else np.inf
@@ -671,24 +672,41 @@ def _prepare_shared(
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def _ray_terms(kx, ky, uz, d_rho):  # pragma: no cover - numba
+    """A prepared ray's per-ray constants: ``(hk, slope, step_t, ikx, iky)``.
+
+    ``hk`` the horizontal cells per metre along the ray, ``slope`` its rise per
+    horizontal cell, ``step_t`` the ray length per range bin, ``ikx, iky`` the inverse
+    grid steps of the cell walk (0 for an axis the ray does not move along). Computed
+    in the set-up pass, where the rays' divisions and square roots overlap, rather than
+    at the head of each walk, where they wait on one another.
+    """
+    hk = math.sqrt(kx * kx + ky * ky)
+    slope = uz / hk
+    step_t = d_rho / hk
+    ikx = 1.0 / kx if kx != 0.0 else 0.0
+    iky = 1.0 / ky if ky != 0.0 else 0.0
+    return hk, slope, step_t, ikx, iky
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def _angular_entry(
-    kx, ky, uz, t_a, t_end, tree, t_off, t_size, slot_of_az, d_rho, start, s_unit
+    kx, ky, hk, slope, t_a, t_end, tree, t_off, t_size, slot_of_az, d_rho, start, s_unit
 ):  # pragma: no cover - numba
     """Where one prepared ray (``_prepare`` said HIT) enters the angular index.
 
-    Returns ``(slot, b, b_end)``: the ray's slot, its first candidate range bin ``b``
-    (``b_end + 1`` if none) and its last range bin; ``slot`` is -1 for a vertical ray and
-    -2 for one whose azimuth bin is not built (both take the pyramid walk).
+    ``hk, slope``: :func:`_ray_terms`'. Returns ``(slot, b, b_end)``: the ray's slot,
+    its first candidate range bin ``b`` (``b_end + 1`` if none) and its last range bin;
+    ``slot`` is -1 for a vertical ray and -2 for one whose azimuth bin is not built (both
+    take the pyramid walk).
     """
     n_az = slot_of_az.shape[0]
-    hk = math.sqrt(kx * kx + ky * ky)
     if not hk > 0.0:
         return -1, 0, -1
     sl = slot_of_az[min(int(pseudo_angle(kx, ky) * (n_az / 4.0)), n_az - 1)]
     if sl < 0:
         return -2, 0, -1
     n_r = t_size[0]
-    slope = uz / hk
     q = slope_class(slope, start.shape[1], s_unit)
     b = max(min(int(t_a * hk / d_rho), n_r - 1), start[sl, q, 0])
     b_end = min(int(t_end * hk / d_rho), n_r - 1, start[sl, q, 1])
@@ -708,12 +726,15 @@ def _cast_one(
     kx,
     ky,
     uz,
+    slope,
+    step_t,
+    ikx,
+    iky,
     t_a,
     t_end,
     tree,
     t_off,
     t_size,
-    d_rho,
     sl,
     b,
     b_end,
@@ -726,7 +747,8 @@ def _cast_one(
     """Walk one prepared ray from the index's origin, entered by :func:`_angular_entry`.
 
     Through the angular index from candidate bin ``b`` of slot ``sl``, or the pyramid
-    walk when ``sl < 0``. Returns ``(count, crossed)``.
+    walk when ``sl < 0``; ``slope, step_t, ikx, iky``: :func:`_ray_terms`'. Returns
+    ``(count, crossed)``.
     """
     if sl < 0:
         return _walk(
@@ -749,9 +771,6 @@ def _cast_one(
             max_hits,
             first_only,
         )
-    hk = math.sqrt(kx * kx + ky * ky)
-    slope = uz / hk
-    step_t = d_rho / hk
     cnt = 0
     cr = False
     last_t = -np.inf
@@ -771,6 +790,8 @@ def _cast_one(
                 kx,
                 ky,
                 uz,
+                ikx,
+                iky,
                 t1,
                 t2,
                 hits,
@@ -854,7 +875,7 @@ def cast_angular_kernel(
         # (as in ``raycast_kernels.cast_kernel``: independent set-ups overlap their
         # latencies; a camera's rays cast ~5-8 % faster).
         stat = np.empty(SCRATCH_ROWS, np.int8)
-        geo = np.empty((SCRATCH_ROWS, 7), np.float64)
+        geo = np.empty((SCRATCH_ROWS, 11), np.float64)
         entry = np.empty((SCRATCH_ROWS, 3), np.int64)
         for blk in range(th, nblocks, nthreads):
             q0 = lo + blk * 64
@@ -909,10 +930,16 @@ def cast_angular_kernel(
                 geo[j, 5] = t_a
                 geo[j, 6] = t_end
                 if st == HIT:
+                    hk, slope, step_t, ikx, iky = _ray_terms(kx, ky, uz, d_rho)
+                    geo[j, 7] = slope
+                    geo[j, 8] = step_t
+                    geo[j, 9] = ikx
+                    geo[j, 10] = iky
                     entry[j, 0], entry[j, 1], entry[j, 2] = _angular_entry(
                         kx,
                         ky,
-                        uz,
+                        hk,
+                        slope,
                         t_a,
                         t_end,
                         tree,
@@ -945,12 +972,15 @@ def cast_angular_kernel(
                     geo[j, 2],
                     geo[j, 3],
                     geo[j, 4],
+                    geo[j, 7],
+                    geo[j, 8],
+                    geo[j, 9],
+                    geo[j, 10],
                     geo[j, 5],
                     geo[j, 6],
                     tree,
                     t_off,
                     t_size,
-                    d_rho,
                     sl,
                     entry[j, 1],
                     entry[j, 2],
@@ -1027,8 +1057,9 @@ def cast_angular_refill_kernel(
         )
         if st != HIT:
             continue
+        hk, slope, step_t, ikx, iky = _ray_terms(kx, ky, uz, d_rho)
         sl, b, b_end = _angular_entry(
-            kx, ky, uz, t_a, t_end, tree, t_off, t_size, slot_of_az, d_rho, start, s_unit
+            kx, ky, hk, slope, t_a, t_end, tree, t_off, t_size, slot_of_az, d_rho, start, s_unit
         )
         _cast_one(
             elev,
@@ -1042,12 +1073,15 @@ def cast_angular_refill_kernel(
             kx,
             ky,
             uz,
+            slope,
+            step_t,
+            ikx,
+            iky,
             t_a,
             t_end,
             tree,
             t_off,
             t_size,
-            d_rho,
             sl,
             b,
             b_end,
