@@ -340,10 +340,12 @@ def _soak(args: argparse.Namespace, site: Path, tmp: Path) -> tuple[list[Sample]
                 print(_row(samples[-1]), flush=True)
                 prev = cur
                 # A fresh store: the page's times are the replay's.
-                end = args.duration - 1.0
-                if float(st["tMax"]) >= end or wall >= max_wall or _replay_ended(samples):
+                t_abs, end = float(st["tMax"]), args.duration - 1.0
+                if t_abs >= end or wall >= max_wall or _replay_ended(samples):
                     break
-                _wait_for_sample(page, w0 + wall + args.every, end)
+                # Watch for the end only when it may come before the next sample.
+                watch = t_abs + args.speed * args.every >= end
+                _wait_for_sample(page, w0 + wall + args.every, end if watch else None)
             final = {**page_state(page), "errors": errors[:20], "n_errors": len(errors)}
             if args.screenshot:
                 args.screenshot.parent.mkdir(parents=True, exist_ok=True)
@@ -355,14 +357,17 @@ def _soak(args: argparse.Namespace, site: Path, tmp: Path) -> tuple[list[Sample]
     return samples, final
 
 
-def _wait_for_sample(page: Any, until: float, end_t_s: float) -> None:
+def _wait_for_sample(page: Any, until: float, end_t_s: float | None) -> None:
     """Sleep until wall time ``until``, or until the page has data of ``end_t_s``.
 
     The end's sample is then taken when the scenario ends, not up to ``--every`` s after
-    (which would lower the pace). Polls only the page's newest time: the full sample
-    forces a garbage collection in the page.
+    (which would lower the pace). Polls only the page's newest time (the full sample
+    forces a garbage collection in the page), and only with an ``end_t_s``.
     """
     while (left := until - time.monotonic()) > 0:
+        if end_t_s is None:
+            time.sleep(left)
+            return
         time.sleep(min(left, 0.5))
         t_max = page.evaluate("() => window.demtrack.store.tMax")
         if t_max is not None and float(t_max) >= end_t_s:
