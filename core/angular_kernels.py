@@ -32,6 +32,7 @@ from numba import njit, prange
 
 from .raycast_kernels import (
     BELOW_GROUND,
+    BLOCK,
     HIT,
     MISS,
     OUTSIDE,
@@ -690,27 +691,56 @@ def _ray_terms(kx, ky, uz, d_rho):  # pragma: no cover - numba
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def _entry_terms(kx, ky, hk, slope, t_a, t_end, n_az, n_q, s_unit, d_rho):  # pragma: no cover
+    """The arithmetic of a prepared ray's entry into an angular index (no table read).
+
+    ``hk, slope``: :func:`_ray_terms`'. Returns ``(az_bin, q, b0, b1)``: the ray's
+    azimuth bin (-1 for a vertical ray), slope class, and the range bins of ``t_a`` and
+    ``t_end``. Branch-free once inlined (the branches are selects), so a loop over a
+    block's rays is vectorised; :func:`_entry_lookup` then reads the tables.
+    """
+    vertical = not hk > 0.0
+    p = 0.0 if vertical else pseudo_angle(kx, ky)
+    az_bin = -1 if vertical else min(int(p * (n_az / 4.0)), n_az - 1)
+    q = slope_class(0.0 if vertical else slope, n_q, s_unit)
+    b0 = int(t_a * hk / d_rho)
+    b1 = int(t_end * hk / d_rho)
+    return az_bin, q, b0, b1
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _entry_lookup(
+    az_bin, q, b0, b1, slope, tree, t_off, t_size, slot_of_az, start
+):  # pragma: no cover - numba
+    """Where a ray enters the angular index, from :func:`_entry_terms`' answers.
+
+    Returns ``(slot, b, b_end)``: the ray's slot, its first candidate range bin ``b``
+    (``b_end + 1`` if none) and its last range bin; ``slot`` is -1 for a vertical ray
+    and -2 for one whose azimuth bin is not built (both take the pyramid walk).
+    """
+    if az_bin < 0:
+        return -1, 0, -1
+    sl = slot_of_az[az_bin]
+    if sl < 0:
+        return -2, 0, -1
+    n_r = t_size[0]
+    b = max(min(b0, n_r - 1), start[sl, q, 0])
+    b_end = min(b1, n_r - 1, start[sl, q, 1])
+    return sl, _next_candidate(tree, sl, t_off, t_size, b, b_end, slope), b_end
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def _angular_entry(
     kx, ky, hk, slope, t_a, t_end, tree, t_off, t_size, slot_of_az, d_rho, start, s_unit
 ):  # pragma: no cover - numba
     """Where one prepared ray (``_prepare`` said HIT) enters the angular index.
 
-    ``hk, slope``: :func:`_ray_terms`'. Returns ``(slot, b, b_end)``: the ray's slot,
-    its first candidate range bin ``b`` (``b_end + 1`` if none) and its last range bin;
-    ``slot`` is -1 for a vertical ray and -2 for one whose azimuth bin is not built (both
-    take the pyramid walk).
+    :func:`_entry_terms` then :func:`_entry_lookup`, for one ray.
     """
-    n_az = slot_of_az.shape[0]
-    if not hk > 0.0:
-        return -1, 0, -1
-    sl = slot_of_az[min(int(pseudo_angle(kx, ky) * (n_az / 4.0)), n_az - 1)]
-    if sl < 0:
-        return -2, 0, -1
-    n_r = t_size[0]
-    q = slope_class(slope, start.shape[1], s_unit)
-    b = max(min(int(t_a * hk / d_rho), n_r - 1), start[sl, q, 0])
-    b_end = min(int(t_end * hk / d_rho), n_r - 1, start[sl, q, 1])
-    return sl, _next_candidate(tree, sl, t_off, t_size, b, b_end, slope), b_end
+    az_bin, q, b0, b1 = _entry_terms(
+        kx, ky, hk, slope, t_a, t_end, slot_of_az.shape[0], start.shape[1], s_unit, d_rho
+    )
+    return _entry_lookup(az_bin, q, b0, b1, slope, tree, t_off, t_size, slot_of_az, start)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -809,6 +839,94 @@ def _cast_one(
     return cnt, cr
 
 
+#: Fields of a block's set-up scratch (see :func:`_set_up_lanes`).
+_GEO_FIELDS = 12
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _store_lane(
+    j, st, gx0, gy0, kx, ky, uz, t_a, t_end, d_rho, n_az, n_q, s_unit, geo, ent
+):  # pragma: no cover - numba
+    """Write one prepared ray's set-up into lane ``j`` of a block's scratch.
+
+    ``geo`` (float64): 1 ``gx0``, 2 ``gy0``, 3 ``kx``, 4 ``ky``, 5 ``uz``, 6 ``t_a``,
+    7 ``t_end``, 8 ``slope``, 9 ``step_t``, 10 ``ikx``, 11 ``iky`` (:func:`_ray_terms`);
+    ``ent`` (int64): 0-3 :func:`_entry_terms`' answers, 4 the status. Field ``f`` of
+    lane ``j`` is at ``f * SCRATCH_ROWS + j``.
+    """
+    R = SCRATCH_ROWS
+    hk, slope, step_t, ikx, iky = _ray_terms(kx, ky, uz, d_rho)
+    az_bin, q, b0, b1 = _entry_terms(kx, ky, hk, slope, t_a, t_end, n_az, n_q, s_unit, d_rho)
+    geo[R + j] = gx0
+    geo[2 * R + j] = gy0
+    geo[3 * R + j] = kx
+    geo[4 * R + j] = ky
+    geo[5 * R + j] = uz
+    geo[6 * R + j] = t_a
+    geo[7 * R + j] = t_end
+    geo[8 * R + j] = slope
+    geo[9 * R + j] = step_t
+    geo[10 * R + j] = ikx
+    geo[11 * R + j] = iky
+    ent[j] = az_bin
+    ent[R + j] = q
+    ent[2 * R + j] = b0
+    ent[3 * R + j] = b1
+    ent[4 * R + j] = st
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _set_up_lanes(
+    nrows,
+    ncols,
+    cell,
+    z_min,
+    z_max,
+    margin,
+    gxs,
+    gys,
+    oz,
+    below,
+    d_rho,
+    n_az,
+    n_q,
+    s_unit,
+    lane_in,
+    geo,
+    ent,
+):  # pragma: no cover - numba
+    """Set up a block of ``BLOCK`` rays from a run's origin, as one vectorised loop.
+
+    ``lane_in`` holds the rays' ``dx, dy, dz, max_range`` in lanes (fields 0-3; lanes
+    past the block's end hold any finite values, and their answers are not read).
+    :func:`_prepare_shared`, :func:`_ray_terms` and :func:`_entry_terms` have no memory
+    access and their branches are selects, so LLVM vectorises the whole set-up (AVX-512
+    on this machine: 8 rays per division and square root, where the set-up of one ray
+    waits on the divider); each lane's arithmetic is the scalar one, to the bit. Answers
+    go to ``geo``, ``ent`` as in :func:`_store_lane`. The lanes are flat arrays at fixed
+    offsets, not 2-D ones: with one base pointer per array LLVM proves the lanes apart.
+    """
+    R = SCRATCH_ROWS
+    for j in range(BLOCK):
+        st, kx, ky, uz, t_a, t_end = _prepare_shared(
+            nrows,
+            ncols,
+            cell,
+            z_min,
+            z_max,
+            margin,
+            gxs,
+            gys,
+            oz,
+            below,
+            lane_in[j],
+            lane_in[R + j],
+            lane_in[2 * R + j],
+            lane_in[3 * R + j],
+        )
+        _store_lane(j, st, gxs, gys, kx, ky, uz, t_a, t_end, d_rho, n_az, n_q, s_unit, geo, ent)
+
+
 @njit(parallel=True, cache=True, error_model="numpy")
 def cast_angular_kernel(
     elev,
@@ -860,7 +978,7 @@ def cast_angular_kernel(
     cap = buf.shape[1]
     hits = buf.reshape(buf.size)
     nrows, ncols = elev.shape
-    nblocks = (hi - lo + 63) // 64
+    nblocks = (hi - lo + BLOCK - 1) // BLOCK
     shared = shared and hi > lo
     gxs = 0.0
     gys = 0.0
@@ -869,39 +987,49 @@ def cast_angular_kernel(
         gxs = (origins[lo, 0] - x_min) / cell - 0.5
         gys = (y_max - origins[lo, 1]) / cell - 0.5
         below = _origin_below(elev, nodes, lvl_off, lvl_shape, gxs, gys, origins[lo, 2])
+    n_az = slot_of_az.shape[0]
+    n_q = start.shape[1]
+    R = SCRATCH_ROWS
     for th in prange(nthreads):
         n_unbuilt = 0
         # A block's rays are all set up and entered into the index first, then walked
         # (as in ``raycast_kernels.cast_kernel``: independent set-ups overlap their
-        # latencies; a camera's rays cast ~5-8 % faster).
-        stat = np.empty(SCRATCH_ROWS, np.int8)
-        geo = np.empty((SCRATCH_ROWS, 11), np.float64)
-        entry = np.empty((SCRATCH_ROWS, 3), np.int64)
+        # latencies). Scratch in lanes: field ``f`` of the block's ray ``j`` at
+        # ``f * SCRATCH_ROWS + j`` (see ``_set_up_lanes``).
+        lane_in = np.ones(4 * R, np.float64)
+        geo = np.empty(_GEO_FIELDS * R, np.float64)
+        ent = np.empty(5 * R, np.int64)
         for blk in range(th, nblocks, nthreads):
-            q0 = lo + blk * 64
-            q1 = min(hi, q0 + 64)
-            for i in range(q0, q1):
-                j = i - q0
-                if shared:
-                    gx0 = gxs
-                    gy0 = gys
-                    st, kx, ky, uz, t_a, t_end = _prepare_shared(
-                        nrows,
-                        ncols,
-                        cell,
-                        z_min,
-                        z_max,
-                        margin,
-                        gxs,
-                        gys,
-                        origins[i, 2],
-                        below,
-                        directions[i, 0],
-                        directions[i, 1],
-                        directions[i, 2],
-                        max_range[i],
-                    )
-                else:
+            q0 = lo + blk * BLOCK
+            q1 = min(hi, q0 + BLOCK)
+            if shared:
+                for i in range(q0, q1):
+                    j = i - q0
+                    lane_in[j] = directions[i, 0]
+                    lane_in[R + j] = directions[i, 1]
+                    lane_in[2 * R + j] = directions[i, 2]
+                    lane_in[3 * R + j] = max_range[i]
+                _set_up_lanes(
+                    nrows,
+                    ncols,
+                    cell,
+                    z_min,
+                    z_max,
+                    margin,
+                    gxs,
+                    gys,
+                    origins[lo, 2],
+                    below,
+                    d_rho,
+                    n_az,
+                    n_q,
+                    s_unit,
+                    lane_in,
+                    geo,
+                    ent,
+                )
+            else:
+                for i in range(q0, q1):
                     st, gx0, gy0, kx, ky, uz, t_a, t_end = _prepare(
                         elev,
                         nodes,
@@ -921,69 +1049,72 @@ def cast_angular_kernel(
                         directions[i, 2],
                         max_range[i],
                     )
-                stat[j] = st
-                geo[j, 0] = gx0
-                geo[j, 1] = gy0
-                geo[j, 2] = kx
-                geo[j, 3] = ky
-                geo[j, 4] = uz
-                geo[j, 5] = t_a
-                geo[j, 6] = t_end
-                if st == HIT:
-                    hk, slope, step_t, ikx, iky = _ray_terms(kx, ky, uz, d_rho)
-                    geo[j, 7] = slope
-                    geo[j, 8] = step_t
-                    geo[j, 9] = ikx
-                    geo[j, 10] = iky
-                    entry[j, 0], entry[j, 1], entry[j, 2] = _angular_entry(
+                    _store_lane(
+                        i - q0,
+                        st,
+                        gx0,
+                        gy0,
                         kx,
                         ky,
-                        hk,
-                        slope,
+                        uz,
                         t_a,
                         t_end,
+                        d_rho,
+                        n_az,
+                        n_q,
+                        s_unit,
+                        geo,
+                        ent,
+                    )
+            for i in range(q0, q1):
+                j = i - q0
+                if ent[4 * R + j] == HIT:
+                    ent[j], ent[R + j], ent[2 * R + j] = _entry_lookup(
+                        ent[j],
+                        ent[R + j],
+                        ent[2 * R + j],
+                        ent[3 * R + j],
+                        geo[8 * R + j],
                         tree,
                         t_off,
                         t_size,
                         slot_of_az,
-                        d_rho,
                         start,
-                        s_unit,
                     )
             for i in range(q0, q1):
                 j = i - q0
                 crossed[i] = False
                 truncated[i] = False
                 counts[i] = 0
-                st = stat[j]
+                st = ent[4 * R + j]
                 if st != HIT:
                     status[i] = st
                     continue
-                sl = entry[j, 0]
+                sl = ent[j]
                 cnt, cr = _cast_one(
                     elev,
                     nodes,
                     lvl_off,
                     lvl_shape,
                     margin,
-                    geo[j, 0],
-                    geo[j, 1],
+                    geo[R + j],
+                    geo[2 * R + j],
                     origins[i, 2],
-                    geo[j, 2],
-                    geo[j, 3],
-                    geo[j, 4],
-                    geo[j, 7],
-                    geo[j, 8],
-                    geo[j, 9],
-                    geo[j, 10],
-                    geo[j, 5],
-                    geo[j, 6],
+                    geo[3 * R + j],
+                    geo[4 * R + j],
+                    geo[5 * R + j],
+                    geo[8 * R + j],
+                    geo[9 * R + j],
+                    geo[10 * R + j],
+                    geo[11 * R + j],
+                    geo[6 * R + j],
+                    geo[7 * R + j],
                     tree,
                     t_off,
                     t_size,
                     sl,
-                    entry[j, 1],
-                    entry[j, 2],
+                    ent[R + j],
+                    ent[2 * R + j],
                     hits,
                     i * cap,
                     cap,

@@ -399,3 +399,67 @@ def test_cone_covers_the_sector():
 def _dir(p):
     p %= 4.0
     return [(1 - p, p), (1 - p, 2 - p), (p - 3, 2 - p), (p - 3, p - 4)][int(p)]
+
+
+# ---------------------------------------------------------------------- vectorised set-up
+@pytest.mark.parametrize("where", ["inside", "west", "south-east", "below", "above"])
+def test_set_up_lanes_match_the_scalar_set_up_to_the_bit(where):
+    """A run's vectorised set-up (``_set_up_lanes``) gives every ray the scalar
+    ``_prepare`` + ``_store_lane`` answers, bit for bit, on awkward rays: axis-aligned,
+    level, vertical, tiny components, zero and finite ranges, origins off the DEM."""
+    from demtrack.core.raycast_kernels import BLOCK, HIT, SCRATCH_ROWS, _prepare
+
+    rng = np.random.default_rng(11)
+    dem = random_dem(rng, holes=False, nrows=17, ncols=23)
+    caster = RayCaster.from_dem(dem)
+    g, p = caster.grid, caster.pyramid
+    x0, y0, x1, y1 = g.bounds
+    mid = [(x0 + x1) / 2, (y0 + y1) / 2]
+    origin = {
+        "inside": [*mid, 25.0],
+        "west": [x0 - 7.0, mid[1], 25.0],
+        "south-east": [x1 + 3.0, y0 - 5.0, 12.0],
+        "below": [*mid, -50.0],
+        "above": [*mid, p.z_max + 5.0],
+    }[where]
+    special = np.array(
+        [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, -1], [0, 0, 1], [1, 1, 0]]
+        + [[1e-300, 0, -1], [0, -1e-300, -1], [3, -2, -1], [-1, 1e-9, -0.3]],
+        float,
+    )
+    d = np.vstack([special, rng.normal(size=(BLOCK - len(special), 3))])
+    d[len(special) :, 2] = -np.abs(d[len(special) :, 2]) - 0.3
+    max_range = np.where(np.arange(BLOCK) % 5 == 0, 0.0, np.inf)
+    max_range[np.arange(BLOCK) % 5 == 1] = 9.0
+    ix = caster._index_for(np.asarray(origin, float), d, 0, BLOCK)
+    args = (float(g.x_min), float(g.y_max), float(g.cell_m))
+    gxs = (origin[0] - args[0]) / args[2] - 0.5
+    gys = (args[1] - origin[1]) / args[2] - 0.5
+    below = ak._origin_below(
+        caster.elevation, p.nodes, p.level_offsets, p.level_shapes, gxs, gys, origin[2]
+    )
+    common = (ix.d_rho, ix.n_az, ix.start.shape[1], ix.s_unit)
+    R = SCRATCH_ROWS
+    lane_in = np.concatenate([d.T.ravel(), max_range])
+    lane_in = np.concatenate([lane_in.reshape(4, BLOCK), np.ones((4, R - BLOCK))], axis=1).ravel()
+    geo = np.full(ak._GEO_FIELDS * R, np.nan)
+    ent = np.full(5 * R, -7, np.int64)
+    nrows, ncols = caster.elevation.shape
+    ak._set_up_lanes(
+        nrows, ncols, args[2], p.z_min, p.z_max, HEIGHT_MARGIN_M, gxs, gys, origin[2], below,
+        *common, lane_in, geo, ent,
+    )  # fmt: skip
+    geo_ref, ent_ref = np.full_like(geo, np.nan), np.full_like(ent, -7)
+    for j in range(BLOCK):
+        prep = _prepare(
+            caster.elevation, p.nodes, p.level_offsets, p.level_shapes, *args, p.z_min,
+            p.z_max, HEIGHT_MARGIN_M, *origin, *d[j], max_range[j],
+        )  # fmt: skip
+        ak._store_lane(j, *prep, *common, geo_ref, ent_ref)
+    status = ent[4 * R : 4 * R + BLOCK]
+    np.testing.assert_array_equal(status, ent_ref[4 * R : 4 * R + BLOCK])
+    assert where != "inside" or (status == HIT).sum() > BLOCK // 4
+    for j in np.flatnonzero(status == HIT):
+        lanes = j + R * np.arange(ak._GEO_FIELDS)[1:]
+        np.testing.assert_array_equal(geo[lanes].view(np.int64), geo_ref[lanes].view(np.int64))
+        np.testing.assert_array_equal(ent[j + R * np.arange(4)], ent_ref[j + R * np.arange(4)])
