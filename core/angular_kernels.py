@@ -30,6 +30,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .block_claims import new_claims, next_block
 from .raycast_kernels import (
     BELOW_GROUND,
     BLOCK,
@@ -988,6 +989,7 @@ def cast_angular_kernel(
     n_az = slot_of_az.shape[0]
     n_q = start.shape[1]
     R = SCRATCH_ROWS
+    claims = new_claims()
     for th in prange(nthreads):
         n_unbuilt = 0
         # A block's rays are all set up and entered into the index first, then walked
@@ -997,7 +999,11 @@ def cast_angular_kernel(
         lane_in = np.ones(4 * R, np.float64)
         geo = np.empty(_GEO_FIELDS * R, np.float64)
         ent = np.empty(5 * R, np.int64)
-        for blk in range(th, nblocks, nthreads):
+        blk, stop = -1, 0
+        while True:
+            blk, stop = next_block(claims, blk, stop, nblocks)
+            if blk >= nblocks:
+                break
             q0 = lo + blk * BLOCK
             q1 = min(hi, q0 + BLOCK)
             if shared:

@@ -18,8 +18,9 @@ into the child the ray is in, and at level 0 it solves the patch. After a skip i
 parent node the walk climbs back one level. Indices are integers and every skip moves one
 node forward along the ray, so the walk always ends; descents are bounded by the levels.
 
-Threads take blocks of ``BLOCK`` rays round-robin, so coherent runs of rays (one camera's
-pixels) are spread over all threads. Within a block every ray is set up (normalised,
+Threads claim blocks of ``BLOCK`` rays in order as they go (``core.block_claims``), so
+coherent runs of rays (one camera's pixels) are spread over all threads, and a thread
+slowed by other load does not hold up the rest. Within a block every ray is set up (normalised,
 clipped, classified) before the first is walked: the set-ups do not depend on each other,
 so the cache misses of one (the below-ground test reads the grid under its origin) overlap
 those of the next instead of waiting behind a whole walk (the bench's incoherent rays cast
@@ -35,6 +36,8 @@ import math
 
 import numpy as np
 from numba import njit, prange
+
+from .block_claims import new_claims, next_block
 
 __all__ = [
     "BELOW_GROUND",
@@ -58,7 +61,7 @@ UPWARD = 2
 BELOW_GROUND = 3
 OUTSIDE = 4
 
-#: Rays per block handed out round-robin to threads (coherent neighbours share a block).
+#: Rays per block claimed by a thread (coherent neighbours share a block).
 BLOCK = 64
 #: Rows of each thread's scratch for a block's set-ups (only ``BLOCK`` are used). Sized
 #: well beyond a block on purpose: with scratch of exactly one block the two-thread
@@ -535,13 +538,19 @@ def cast_kernel(
     hits = buf.reshape(buf.size)
     nblocks = (n + BLOCK - 1) // BLOCK
     ordered = order.shape[0] > 0
-    # Block-interleaved: thread t takes blocks t, t + T, ... so coherent runs of rays
-    # (one camera's pixels) are shared by all threads.
-    for th in prange(nthreads):
+    # Threads claim blocks in order as they finish the last (``core.block_claims``), so
+    # coherent runs of rays (one camera's pixels) are shared by all threads and a thread
+    # slowed by other load does not hold up the rest.
+    claims = new_claims()
+    for _th in prange(nthreads):
         # A block's rays are all set up first, then walked (see the module docstring).
         stat = np.empty(SCRATCH_ROWS, np.int8)
         geo = np.empty((SCRATCH_ROWS, 7), np.float64)
-        for blk in range(th, nblocks, nthreads):
+        blk, stop = -1, 0
+        while True:
+            blk, stop = next_block(claims, blk, stop, nblocks)
+            if blk >= nblocks:
+                break
             q0 = blk * BLOCK
             q1 = min(n, q0 + BLOCK)
             for q in range(q0, q1):
