@@ -41,6 +41,7 @@ from .raycast_kernels import (
     UPWARD,
     _prepare,
     _walk,
+    has_holes,
     keep_root,
     patch_root,
 )
@@ -519,6 +520,7 @@ def next_candidate(tr, t_off, t_size, b, b_end, s):  # pragma: no cover - numba
 def _walk_cells(
     elev,
     margin,
+    holes,
     gx0,
     gy0,
     z0,
@@ -541,7 +543,8 @@ def _walk_cells(
 
     The per-patch work is exactly that of ``raycast_kernels._walk`` at level 0 (same
     tests, same solver, same acceptance window and de-duplication), continuing the
-    ray's ``count`` and ``last_t``. ``ikx, iky``: :func:`_ray_terms`'. Returns
+    ray's ``count`` and ``last_t``. ``ikx, iky``: :func:`_ray_terms`'; ``holes``:
+    ``raycast_kernels.has_holes`` of the DEM. Returns
     ``(count, crossed, last_t, stop)``.
     """
     nrows, ncols = elev.shape
@@ -566,7 +569,7 @@ def _walk_cells(
         z_exit = z0 + t_exit * uz
         zl = min(z_cur, z_exit) - margin
         zh = max(z_cur, z_exit) + margin
-        s, hole = patch_root(elev, nx, ny, gx0, gy0, kx, ky, uz, t_cur, z_cur, zl, zh)
+        s, hole = patch_root(elev, holes, nx, ny, gx0, gy0, kx, ky, uz, t_cur, z_cur, zl, zh)
         crossed = crossed or hole
         count, last_t, kept = keep_root(s, t_cur, t_exit, hits, base, cap, count, last_t)
         if kept and (first_only or count > max_count):
@@ -800,6 +803,7 @@ def _cast_one(
             max_hits,
             first_only,
         )
+    holes = has_holes(nodes, lvl_off)
     cnt = 0
     cr = False
     last_t = -np.inf
@@ -813,6 +817,7 @@ def _cast_one(
             cnt, c2, last_t, stop = _walk_cells(
                 elev,
                 margin,
+                holes,
                 gx0,
                 gy0,
                 z0,

@@ -50,6 +50,7 @@ __all__ = [
     "cast_kernel",
     "check_rays_kernel",
     "gather_hits_kernel",
+    "has_holes",
     "hit_points_kernel",
     "ray_order_kernel",
 ]
@@ -296,13 +297,21 @@ def _solve_at(elev, iy, ix, gx0, gy0, kx, ky, uz, t0, z_t0):  # pragma: no cover
     return _solve_patch(e00, e01, e10, e11, ix, iy, gx0, gy0, kx, ky, uz, t0, z_t0)
 
 
+@njit(cache=True, inline="always")
+def has_holes(nodes, lvl_off):  # pragma: no cover - numba
+    """Whether the DEM under a min/max pyramid has a nodata cell (its root's max is +inf)."""
+    return nodes[lvl_off[lvl_off.shape[0] - 1], 0] == np.inf
+
+
 @njit(cache=True, error_model="numpy", inline="always")
-def patch_root(elev, nx, ny, gx0, gy0, kx, ky, uz, t_cur, z_cur, zl, zh):  # pragma: no cover
+def patch_root(elev, holes, nx, ny, gx0, gy0, kx, ky, uz, t_cur, z_cur, zl, zh):  # pragma: no cover
     """Where the ray crosses patch ``(ny, nx)`` from ``t_cur`` on; NaN when it does not.
 
     ``zl, zh`` bound the ray's height over the patch (with margin). Returns ``(s, hole)``:
     ``s`` the crossing's distance past ``t_cur``, ``hole`` whether the patch has a nodata
-    corner (it cannot be hit).
+    corner (it cannot be hit). ``holes``: whether the DEM has any nodata cell
+    (:func:`has_holes`); when it has none the corners are not tested for NaN (about 5 %
+    of a camera ray's cast).
     """
     e00 = np.float64(elev[ny, nx])
     e01 = np.float64(elev[ny, nx + 1])
@@ -310,7 +319,7 @@ def patch_root(elev, nx, ny, gx0, gy0, kx, ky, uz, t_cur, z_cur, zl, zh):  # pra
     e11 = np.float64(elev[ny + 1, nx + 1])
     s = np.nan
     hole = False
-    if e00 != e00 or e01 != e01 or e10 != e10 or e11 != e11:
+    if holes and (e00 != e00 or e01 != e01 or e10 != e10 or e11 != e11):
         hole = True
         # A ray lying exactly on a grid line borders two patches (four at a vertex);
         # when the walked one is a hole the surface on the shared edge may still be
@@ -387,6 +396,7 @@ def _walk(
     pcols = ncols - 1
     prows = nrows - 1
     top = lvl_off.shape[0]
+    holes = has_holes(nodes, lvl_off)
     ix0 = min(max(int(math.floor(gx0 + t_a * kx)), 0), pcols - 1)
     iy0 = min(max(int(math.floor(gy0 + t_a * ky)), 0), prows - 1)
     # Start at the coarsest level whose nodes are not much larger than the footprint.
@@ -456,7 +466,7 @@ def _walk(
                 ny = min(ny, nrl - 1)
                 continue
         else:
-            s, hole = patch_root(elev, nx, ny, gx0, gy0, kx, ky, uz, t_cur, z_cur, zl, zh)
+            s, hole = patch_root(elev, holes, nx, ny, gx0, gy0, kx, ky, uz, t_cur, z_cur, zl, zh)
             crossed = crossed or hole
             count, last_t, kept = keep_root(s, t_cur, t_exit, hits, base, cap, count, last_t)
             if kept and (first_only or count > max_count):

@@ -42,7 +42,8 @@ def pyramid_reference(elevation: np.ndarray) -> list[np.ndarray]:
     mx = np.where(hole, np.inf, np.nanmax(np.where(hole, 0, corners), axis=0))
     mn = np.where(hole, -np.inf, np.nanmin(np.where(hole, 0, corners), axis=0))
     levels = [np.stack([mx, mn], axis=-1).astype(np.float32)]
-    while levels[-1].shape[:2] != (1, 1):
+    # At least one stored level, even over a single patch (a 2 x 2 grid).
+    while len(levels) == 1 or levels[-1].shape[:2] != (1, 1):
         lv = levels[-1]
         r, c = lv.shape[:2]
         # Pad odd sizes by repeating the last row/column (a no-op for max and min).

@@ -428,6 +428,22 @@ def test_pyramid_matches_reference():
         build_pyramid(np.zeros((1, 5), np.float32))
 
 
+@pytest.mark.parametrize("use_kernel", [True, False])
+def test_pyramid_root_tells_whether_the_dem_has_holes(use_kernel):
+    """``has_holes`` (the walks skip the NaN tests without holes) sees any single hole,
+    wherever it is, corners and last row and column included, from either builder."""
+    rng = np.random.default_rng(5)
+    for nr, nc in [(2, 2), (2, 7), (5, 3), (17, 23), (64, 65)]:
+        e = rng.normal(size=(nr, nc)).astype(np.float32)
+        p = build_pyramid(e, use_kernel=use_kernel)
+        assert not kernels.has_holes(p.nodes, p.level_offsets)
+        for r, c in [(0, 0), (nr - 1, nc - 1), (nr - 1, 0), (0, nc - 1), (nr // 2, nc // 2)]:
+            h = e.copy()
+            h[r, c] = np.nan
+            p = build_pyramid(h, use_kernel=use_kernel)
+            assert kernels.has_holes(p.nodes, p.level_offsets), (nr, nc, r, c)
+
+
 # ---------------------------------------------------------------------- API behaviour
 def test_thread_count_does_not_change_answers():
     rng = np.random.default_rng(4)
