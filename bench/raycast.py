@@ -350,12 +350,15 @@ def _report(
                 )
                 continue
             b = theirs.rate[base, mode]
+            # The pyramid-only variant is a comparison (what the angular index adds), not
+            # a separate target: the targets are the product's casts.
+            verdict = f">= {target}x " + _ok(a / b >= target) if name == base else "(comparison)"
             row(
                 f"{name} rays, {mode} hit{'s' if mode == 'all' else ''}",
                 _fmt_rate(a),
                 _fmt_rate(b),
                 f"{a / b:.2f}",
-                f">= {target}x " + _ok(a / b >= target),
+                verdict,
             )
     if theirs is None:
         return

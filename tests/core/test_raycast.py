@@ -536,3 +536,5 @@ def test_benchmark_smoke(capsys):
         numba.set_num_threads(before)
     out = capsys.readouterr().out
     assert "camera rays, first hit" in out and "Open3D/Embree" in out
+    pyramid_only = [ln for ln in out.splitlines() if "(pyramid only) rays" in ln]
+    assert len(pyramid_only) == 2 and all(ln.endswith("(comparison)") for ln in pyramid_only)
