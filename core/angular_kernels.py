@@ -43,6 +43,7 @@ from .raycast_kernels import (
     _walk,
     has_holes,
     keep_root,
+    load_direction_lanes,
     patch_root,
 )
 
@@ -1012,12 +1013,9 @@ def cast_angular_kernel(
             q0 = lo + blk * BLOCK
             q1 = min(hi, q0 + BLOCK)
             if shared:
+                load_direction_lanes(directions, q0, q1, lane_in)
                 for i in range(q0, q1):
-                    j = i - q0
-                    lane_in[j] = directions[i, 0]
-                    lane_in[R + j] = directions[i, 1]
-                    lane_in[2 * R + j] = directions[i, 2]
-                    lane_in[3 * R + j] = max_range[i]
+                    lane_in[3 * R + i - q0] = max_range[i]
                 _set_up_lanes(
                     nrows,
                     ncols,

@@ -20,11 +20,11 @@ node forward along the ray, so the walk always ends; descents are bounded by the
 
 Threads claim blocks of ``BLOCK`` rays in order as they go (``core.block_claims``), so
 coherent runs of rays (one camera's pixels) are spread over all threads, and a thread
-slowed by other load does not hold up the rest. Within a block every ray is set up (normalised,
-clipped, classified) before the first is walked: the set-ups do not depend on each other,
-so the cache misses of one (the below-ground test reads the grid under its origin) overlap
-those of the next instead of waiting behind a whole walk (the bench's incoherent rays cast
-about 15 % faster; the answers are the same).
+slowed by other load does not hold up the rest. Within a block every ray is set up
+(normalised, clipped, classified) before the first is walked: the set-ups do not depend on
+each other, so the cache misses of one (the below-ground test reads the grid under its
+origin) overlap those of the next instead of waiting behind a whole walk (the bench's
+incoherent rays cast about 15 % faster; the answers are the same).
 
 No ``fastmath``: the kernels rely on NaN/inf semantics (holes, vertical rays) and on
 IEEE rounding to agree with the reference twin; the speed comes from the pyramid.
@@ -695,6 +695,20 @@ def cast_all_refill_kernel(
         )
 
 
+@njit(cache=True, inline="always")
+def load_direction_lanes(directions, q0, q1, lanes):  # pragma: no cover - numba
+    """Copy the directions of rays ``q0:q1`` into a block's lanes.
+
+    ``dx, dy, dz`` of the block's ray ``j`` go to ``j``, ``SCRATCH_ROWS + j`` and
+    ``2 * SCRATCH_ROWS + j``: the layout the vectorised block loops read.
+    """
+    R = SCRATCH_ROWS
+    for i in range(q0, q1):
+        lanes[i - q0] = directions[i, 0]
+        lanes[R + i - q0] = directions[i, 1]
+        lanes[2 * R + i - q0] = directions[i, 2]
+
+
 @njit(cache=True, error_model="numpy", inline="always")
 def _unit_lanes(lanes):  # pragma: no cover - numba
     """Unit directions of a block's rays, in place, as one vectorised loop.
@@ -731,10 +745,7 @@ def gather_hits_kernel(
         lanes = np.empty(3 * R, np.float64)
         q0 = blk * BLOCK
         q1 = min(n, q0 + BLOCK)
-        for i in range(q0, q1):
-            lanes[i - q0] = directions[i, 0]
-            lanes[R + i - q0] = directions[i, 1]
-            lanes[2 * R + i - q0] = directions[i, 2]
+        load_direction_lanes(directions, q0, q1, lanes)
         _unit_lanes(lanes)
         for i in range(q0, q1):
             c = counts[i]
