@@ -27,7 +27,7 @@ _TOKEN = "bench-console-token"
 
 
 def _ingest(site: Path, server: ServeProcess, scenario: str) -> int:
-    from demtrack.core.site import load_site
+    from demtrack.core.site.folder import load_site
     from demtrack.samplesite.scenarios import make_scenario
 
     dets = make_scenario(load_site(site), scenario).detections

@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from demtrack.core.site import Site
+    from demtrack.core.site.folder import Site
     from demtrack.core.tracking import Fix, Track, TrackingMetrics, TruthPath
     from demtrack.core.tracking.protocols import Measurement
     from demtrack.core.tracking.types import Detection
@@ -307,8 +307,8 @@ def track_dense(site: Site, fixes: Sequence[Fix], method: str) -> list[Track]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Build the dense scene, track it with each method and print the scores."""
-    from demtrack.core.fix_builder import build_fixes
-    from demtrack.core.site import load_site
+    from demtrack.core.geolocation.fix_builder import build_fixes
+    from demtrack.core.site.folder import load_site
 
     p = argparse.ArgumentParser(prog="dense_tracking", description=__doc__.split("\n")[0])
     p.add_argument("--site", default="/tmp/site", help="a built sample site")

@@ -83,7 +83,7 @@ class CpuMeter:
 def replay_in_process(args: argparse.Namespace, site_dir: Path, db: Path) -> list[dict[str, Any]]:
     """Replay into a pipeline; one row per ``args.every`` s of scenario time."""
     from demtrack.commands.serve import tune_gc_for_serving
-    from demtrack.core.site import load_site
+    from demtrack.core.site.folder import load_site
     from demtrack.server.db import Store
     from demtrack.server.pipeline import Pipeline, pipeline_options
     from demtrack.server.replay import scenario_stream

@@ -21,7 +21,7 @@ tensors handed to it). Without ``clear_refs`` it falls back to a plain RSS diffe
 lower bound).
 
 Camera rays (one origin per camera) are cast with per-origin angular indexes
-(``core.angular_index``); their build is timed apart ("set-up per camera") and the
+(``core.raycast.angular_index``); their build is timed apart ("set-up per camera") and the
 casts reuse them, as a console reuses a fixed camera's index for every frame. The camera
 set is also cast with the pyramid walk alone ("pyramid only") for comparison. Last, the
 camera set is cast on one thread by each engine in turns and timed in CPU time per ray (a
@@ -43,7 +43,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from demtrack.core.raycast import RayCaster, warm_up
+from demtrack.core.raycast.cast import RayCaster, warm_up
 
 from .synthetic_terrain import SyntheticDem, camera_rays, incoherent_rays, synthetic_dem
 
@@ -143,7 +143,7 @@ def _run_ours(dem: SyntheticDem, sets: dict, repeat: int) -> _Result:
     with _PeakMemory() as mem:
         res.setup_s, caster = _best(lambda: RayCaster.from_dem(dem), repeat)
         # Per-origin set-up, timed apart: the angular index of every camera (the rays
-        # of one camera are one run of a shared origin; see core.angular_index).
+        # of one camera are one run of a shared origin; see core.raycast.angular_index).
         o, d = sets["camera"]
         starts = np.flatnonzero(np.r_[True, np.any(o[1:] != o[:-1], axis=1)])
         stops = np.r_[starts[1:], len(o)]

@@ -56,7 +56,7 @@ _TARGET_P95_MS = 50.0
 
 def scenario_records(site_dir: Path, n: int) -> list[dict[str, Any]]:
     """``n`` detection records from the sample scenarios, repeated later in time as needed."""
-    from demtrack.core.site import load_site
+    from demtrack.core.site.folder import load_site
     from demtrack.samplesite.scenarios import make_scenario
 
     site = load_site(site_dir)
@@ -160,7 +160,7 @@ def _ingest(url: str, batches: list[list[dict[str, Any]]]) -> tuple[float, int]:
 
 def _durable_only(site_dir: Path, batches: list[list[dict[str, Any]]]) -> float:
     """Validation and committed inserts alone, in-process (detections/s)."""
-    from demtrack.core.site import load_site
+    from demtrack.core.site.folder import load_site
     from demtrack.server.db import Store
     from demtrack.server.pipeline import Pipeline
 

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from demtrack.core.grid import GridSpec
-from demtrack.core.surface import bilinear_sample
+from demtrack.core.terrain.grid import GridSpec
+from demtrack.core.terrain.surface import bilinear_sample
 
 __all__ = ["SyntheticDem", "camera_rays", "incoherent_rays", "synthetic_dem"]
 

@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from demtrack.core.camera import Camera, Intrinsics
-from demtrack.core.dem import Dem
+from demtrack.core.camera.pinhole import Camera, Intrinsics
+from demtrack.core.terrain.dem import Dem
 
 from .synthetic_terrain import synthetic_dem
 
@@ -49,7 +49,7 @@ def viewshed_file(
     """Whole-process job: read a DEM GeoTIFF, write its 0/255 viewshed GeoTIFF."""
     import rasterio
 
-    from demtrack.core.visibility import PanTiltLimits, viewshed
+    from demtrack.core.visibility.viewshed import PanTiltLimits, viewshed
 
     dem = Dem.read(dem_path)
     t0 = time.perf_counter()
@@ -72,8 +72,8 @@ def startup_floor() -> None:
     """Whole-process floor: the imports and kernels of :func:`viewshed_file`, a 4 x 4 DEM."""
     import rasterio  # noqa: F401
 
-    from demtrack.core.grid import GridSpec
-    from demtrack.core.visibility import viewshed
+    from demtrack.core.terrain.grid import GridSpec
+    from demtrack.core.visibility.viewshed import viewshed
 
     dem = Dem(GridSpec(0.0, 4.0, 1.0, 4, 4), np.zeros((4, 4), np.float32))
     viewshed(dem, observer_camera(2.0, 2.0, 3.0), mode="reachable")

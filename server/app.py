@@ -24,11 +24,11 @@ from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
-from demtrack.core.camera import undistort_normalized_nb
+from demtrack.core.camera.pinhole import undistort_normalized_nb
 from demtrack.core.errors import DemtrackError, SiteError
-from demtrack.core.raycast import warm_up
-from demtrack.core.site import Site, load_site
-from demtrack.core.surface import bilinear_sample
+from demtrack.core.raycast.cast import warm_up
+from demtrack.core.site.folder import Site, load_site
+from demtrack.core.terrain.surface import bilinear_sample
 from demtrack.core.tracking import METHODS
 from demtrack.core.tracking.warm import warm_up as warm_tracker
 

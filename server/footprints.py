@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from demtrack.core.camera import Camera
-from demtrack.core.geodesy import LocalFrame
-from demtrack.core.raycast import RayCaster
+from demtrack.core.camera.pinhole import Camera
+from demtrack.core.geo.geodesy import LocalFrame
+from demtrack.core.raycast.cast import RayCaster
 
 __all__ = ["border_pixels", "footprint"]
 

@@ -2,7 +2,7 @@
 
 Each image covers its grid exactly: pixel (0, 0) is cell (0, 0), the north-west cell, so
 a map in the site frame places it over the grid's outer bounds
-(:attr:`~demtrack.core.grid.GridSpec.bounds`).
+(:attr:`~demtrack.core.terrain.grid.GridSpec.bounds`).
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from typing import Literal
 
 import numpy as np
 
-from demtrack.core.dem import Dem
+from demtrack.core.terrain.dem import Dem
 
 __all__ = ["RELIEF_KINDS", "hillshade", "png_bytes", "relief_rgba"]
 

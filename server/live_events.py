@@ -2,9 +2,9 @@
 
 :class:`LiveEvents` is called by the pipeline after each batch with the tracks as they
 stand and the scenario time the tracker has reached. Every ``every_s`` of scenario time it
-runs :mod:`demtrack.core.activity` (loitering, rendezvous, convoy, zone enter/leave) on
+runs :mod:`demtrack.core.activity.detectors` (loitering, rendezvous, convoy, zone enter/leave) on
 the last ``window_s`` of every track, thinned to points ``sample_s`` apart, and
-:func:`demtrack.core.handoff.predict_handoff` on each live track; the cost per evaluation
+:func:`demtrack.core.visibility.handoff.predict_handoff` on each live track; the cost per evaluation
 is bounded by the window, not by how long the server has run.
 
 Episodes are deduplicated: a loitering, rendezvous or convoy found again (same kind and
@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from demtrack.core.activity import (
+from demtrack.core.activity.detectors import (
     ActivityEvent,
     ConvoyParams,
     LoiterParams,
@@ -43,10 +43,10 @@ from demtrack.core.activity import (
     detect_rendezvous,
     detect_zone_crossings,
 )
-from demtrack.core.handoff import HandoffTarget, predict_handoffs
-from demtrack.core.site import Site
-from demtrack.core.target_heights import target_height_for
+from demtrack.core.site.folder import Site
 from demtrack.core.tracking.types import Track
+from demtrack.core.visibility.handoff import HandoffTarget, predict_handoffs
+from demtrack.core.visibility.target_heights import target_height_for
 
 __all__ = ["INTERVAL_KINDS", "LiveEventParams", "LiveEvents", "Window"]
 

@@ -44,14 +44,14 @@ from typing import Any
 
 import numpy as np
 
-from demtrack.core.activity import ConvoyParams, LoiterParams, RendezvousParams
-from demtrack.core.detections import read_detection_records
+from demtrack.core.activity.detectors import ConvoyParams, LoiterParams, RendezvousParams
 from demtrack.core.errors import DemtrackError
-from demtrack.core.fix_builder import build_fixes, sensor_sizes
-from demtrack.core.site import Site
+from demtrack.core.geolocation.fix_builder import build_fixes, sensor_sizes
+from demtrack.core.io.detections import read_detection_records
+from demtrack.core.site.folder import Site
+from demtrack.core.site.zone_io import read_zones_geojson
 from demtrack.core.tracking import build_tracker
 from demtrack.core.tracking.types import CLASSES, Detection, Fix, Track
-from demtrack.core.zone_io import read_zones_geojson
 
 from .db import Store, dumps_json, published_text
 from .hub import StreamMessage
@@ -387,7 +387,7 @@ class Pipeline:
 
     # ------------------------------------------------------------------ ingest
     def _validate(self, records: Sequence[Any]) -> tuple[list[Detection], dict[str, Any]]:
-        """Check records with the detection-file rules (:mod:`demtrack.core.detections`).
+        """Check records with the detection-file rules (:mod:`demtrack.core.io.detections`).
 
         Time order is checked across batches too: one valid seed record per sensor at its
         latest stored time goes first, so the reader's own ``time_backwards`` rule sees it.

@@ -32,7 +32,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
-from demtrack.core.site import Site
+from demtrack.core.site.folder import Site
 from demtrack.core.tracking.types import Detection
 
 from .replay_schedule import replay_schedule

@@ -50,10 +50,10 @@ from typing import Any
 
 import numpy as np
 
-from demtrack.core.camera import Intrinsics
-from demtrack.core.dem import Dem
-from demtrack.core.grid import GridSpec
-from demtrack.core.site import Site
+from demtrack.core.camera.pinhole import Intrinsics
+from demtrack.core.site.folder import Site
+from demtrack.core.terrain.dem import Dem
+from demtrack.core.terrain.grid import GridSpec
 
 __all__ = [
     "FOLLOW_OFFSET_M",
@@ -616,7 +616,7 @@ class Scene3D:
         import trimesh
         from PIL import Image
 
-        from demtrack.core.orthophoto import read_orthophoto
+        from demtrack.core.site.orthophoto import read_orthophoto
 
         mesh = terrain_mesh(self.site.dem, self.mesh_side)
         visual: Any = None

@@ -8,8 +8,8 @@ from typing import Annotated, Any
 
 from fastapi import Depends, Request
 
-from demtrack.core.raycast import RayCaster
-from demtrack.core.site import Site
+from demtrack.core.raycast.cast import RayCaster
+from demtrack.core.site.folder import Site
 
 from .db import Store
 from .hub import Hub

@@ -2,7 +2,7 @@
 
 Entry points: :func:`run_tracker` (batch), :func:`build_tracker` (online
 :class:`Tracker`), :data:`METHODS`; values in :mod:`.types`; metrics in :mod:`.metrics`
-and :mod:`.ospa`; synthetic scenarios in :mod:`.synthetic`.
+and :mod:`.ospa`.
 """
 
 from __future__ import annotations

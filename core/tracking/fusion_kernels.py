@@ -4,8 +4,8 @@ The fusion screens every (a, b) pair of two sensors' fixes of one step and trian
 the pairs it matches. With a handful of fixes per sensor, the numpy forms of these steps
 spent their time in the overhead of some fifty small array operations per call; these
 kernels do the same arithmetic in one pass. Plain-numpy twins:
-:func:`demtrack.core.tracking.fusion_reference.screen_pairs_reference` and
-:func:`~demtrack.core.tracking.fusion_reference.triangulation_cov_reference` (the tests
+:func:`demtrack.core.tracking.reference.screen_pairs_reference` and
+:func:`~demtrack.core.tracking.reference.triangulation_cov_reference` (the tests
 compare them on random pairs).
 
 Arrays only; the checks and the scalar fall-back for pairs at a threshold's round-off stay

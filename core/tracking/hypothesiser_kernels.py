@@ -5,7 +5,8 @@ such tiny arrays the gating cost a dozen ufunc calls, a concatenation and fancy 
 per scan, far more than its arithmetic. This kernel does it in one call with the same
 operations in the same order (:func:`~demtrack.core.tracking.hypothesiser.mahalanobis2`'s
 closed form, no fused multiply-add), so its distances equal the numpy ones to the last
-bit. Its plain-numpy twin is :func:`gate_reference` (the form it replaced); the tests
+bit. Its plain-numpy twin is
+:func:`~demtrack.core.tracking.reference.gate_reference` (the form it replaced); the tests
 compare them.
 """
 
@@ -16,7 +17,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["gate_kernel", "gate_reference"]
+__all__ = ["gate_kernel"]
 
 
 # error_model="numpy": a singular covariance gives inf or NaN as numpy does, not an error
@@ -80,24 +81,3 @@ def gate_kernel(means_xy, covs_xy, z_xy, cov, slots, allowed):  # pragma: no cov
             best[i, j] = bk
             d2[i, j] = bv
     return best, d2
-
-
-def gate_reference(
-    means_xy: np.ndarray,
-    covs_xy: np.ndarray,
-    z_xy: np.ndarray,
-    cov: np.ndarray,
-    slots: np.ndarray,
-    allowed: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`gate_kernel` in numpy (batched :func:`~.hypothesiser.mahalanobis2`)."""
-    from .hypothesiser import mahalanobis2
-
-    n_tracks = means_xy.shape[0]
-    s = covs_xy[:, None, :, :] + cov[None, :, :, :]
-    nu = z_xy[None, :, :] - means_xy[:, None, :]
-    d2 = mahalanobis2(s, nu)
-    d2 = np.concatenate([d2, np.full((n_tracks, 1), np.inf)], axis=1)[:, slots]
-    best = np.argmin(d2, axis=2)
-    d2_best = np.take_along_axis(d2, best[..., None], axis=2)[..., 0]
-    return np.where(allowed, best, -1), np.where(allowed, d2_best, np.inf)

@@ -3,7 +3,7 @@
 A live tracker predicts every track at each scan and updates and smooths the ones that
 take a fix: thousands of 4 x 4 products a second. As numpy calls each product cost more
 in call overhead than in arithmetic; these kernels do each step in one call. Plain-numpy
-twins (the forms they replaced) are in :mod:`demtrack.core.tracking.kalman_reference`;
+twins (the forms they replaced) are in :mod:`demtrack.core.tracking.reference`;
 the tests compare them.
 """
 

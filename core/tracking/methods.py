@@ -206,7 +206,7 @@ def _network(roads: Roads) -> RoadGraph | None:
     if roads is None or isinstance(roads, RoadGraph):
         return roads
     # duck-typed: anything holding its centrelines as ``.lines`` (the site's
-    # :class:`demtrack.core.roads.RoadNetwork`), or the lines themselves
+    # :class:`demtrack.core.geolocation.roads.RoadNetwork`), or the lines themselves
     lines = list(getattr(roads, "lines", roads))
     return RoadGraph(lines) if lines else None
 
@@ -222,7 +222,7 @@ def build_tracker(
         A key of :data:`METHODS`.
     roads : RoadGraph, sequence of shapely.LineString, or object with ``.lines``, optional
         Road centrelines in the local frame (m) (e.g. the site's
-        :class:`demtrack.core.roads.RoadNetwork`).
+        :class:`demtrack.core.geolocation.roads.RoadNetwork`).
     config : TrackerConfig, optional
         Settings (defaults if None).
     """

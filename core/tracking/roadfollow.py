@@ -4,7 +4,7 @@ A vehicle on a road follows it: predicted in a straight line over a long absence
 up in the fields beside a bend. :func:`follow_road` carries the position along the
 nearest road centreline at the current speed, in the direction of travel, keeping the
 lateral (lane) offset; past either end of the line it continues straight. Shared by
-hand-off prediction (:mod:`demtrack.core.handoff`) and track re-acquisition
+hand-off prediction (:mod:`demtrack.core.visibility.handoff`) and track re-acquisition
 (:mod:`.reacquire`).
 """
 

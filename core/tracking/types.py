@@ -243,7 +243,7 @@ class Fix:
         (float ``t_s``, a known class, int index, read-only finite float64 arrays of the
         documented shapes, a unit ``direction_enu``, positive ``hit_sigma_m``, symmetric
         positive definite ``hit_cov_en_m2``). For batch builders such as
-        :func:`demtrack.core.fix_builder.build_fixes`, which check whole arrays at once.
+        :func:`demtrack.core.geolocation.fix_builder.build_fixes`, which check whole arrays at once.
         """
         fix = object.__new__(cls)
         # the instance dict filled at once (what object.__setattr__ per field does, at a

@@ -19,7 +19,7 @@ def _given(**values: float | None) -> dict[str, Any]:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from demtrack.core.activity import (
+    from demtrack.core.activity.detectors import (
         ConvoyParams,
         LoiterParams,
         RendezvousParams,
@@ -28,8 +28,8 @@ def _run(args: argparse.Namespace) -> int:
         detect_rendezvous,
         detect_zone_crossings,
     )
-    from demtrack.core.site import load_site
-    from demtrack.core.zone_io import read_zones_geojson
+    from demtrack.core.site.folder import load_site
+    from demtrack.core.site.zone_io import read_zones_geojson
 
     from .track import track_detections
 

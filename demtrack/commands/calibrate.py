@@ -15,14 +15,14 @@ from .choices import DEFAULT_FREE, FREE_PARAMETERS
 from .common import add_site_argument
 
 if TYPE_CHECKING:
-    from demtrack.core.gcp_calibration import GcpFit, LeaveOneOut
-    from demtrack.core.site import Sensor, Site
+    from demtrack.core.camera.gcp_calibration import GcpFit, LeaveOneOut
+    from demtrack.core.site.folder import Sensor, Site
 
 __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
-    from demtrack.core.site import load_site
+    from demtrack.core.site.folder import load_site
 
     site = load_site(args.site)
     sensor = site.sensor(args.sensor)
@@ -78,8 +78,8 @@ def _run(args: argparse.Namespace) -> int:
 
 def _fitted_sensor(site: Site, sensor: Sensor, fit: GcpFit) -> Sensor:
     """The sensor posed as the fit says: yaw = mount yaw + pan reading, tilt, roll."""
-    from demtrack.core.pantilt import PanTiltHead
-    from demtrack.core.site import Sensor
+    from demtrack.core.camera.pantilt import PanTiltHead
+    from demtrack.core.site.folder import Sensor
 
     cam = fit.camera
     az, tilt, roll = cam.azimuth_tilt_roll_deg()
@@ -179,10 +179,10 @@ def _gcp_json(sensor: Sensor, fit: GcpFit, loo: LeaveOneOut, written: bool) -> d
 
 
 def _run_gcps(args: argparse.Namespace) -> int:
-    from demtrack.core.gcp_calibration import fit_camera_to_gcps, leave_one_out, parse_free
-    from demtrack.core.gcp_io import gcps_to_local, read_gcp_csv
-    from demtrack.core.site import load_site
-    from demtrack.core.site_update import read_manifest, write_manifest
+    from demtrack.core.camera.gcp_calibration import fit_camera_to_gcps, leave_one_out, parse_free
+    from demtrack.core.camera.gcp_io import gcps_to_local, read_gcp_csv
+    from demtrack.core.site.folder import load_site
+    from demtrack.core.site.update import read_manifest, write_manifest
 
     site = load_site(args.site)
     sensor = site.sensor(args.sensor)

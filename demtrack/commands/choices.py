@@ -33,10 +33,10 @@ TRACKING_METHODS: tuple[str, ...] = (
 #: Tracking method used by ``track``, ``activity``, ``gaps`` and ``evaluate-activity``.
 DEFAULT_METHOD = "multi-hypothesis-road"
 
-#: ``demtrack.core.site.MANIFEST``: a folder holding this file is a site.
+#: ``demtrack.core.site.folder.MANIFEST``: a folder holding this file is a site.
 MANIFEST = "site.json"
 
-#: ``demtrack.core.geolocate.RULES``.
+#: ``demtrack.core.geolocation.geolocate.RULES``.
 GEOLOCATE_RULES: tuple[str, ...] = ("first", "last", "all", "road")
 
 #: ``sorted(demtrack.samplesite.scenarios.SCENARIOS)``.
@@ -62,7 +62,7 @@ ACTIVITY_CASE_NAMES: tuple[str, ...] = (
 #: ``demtrack.samplesite.activity_scenarios.DEFAULT_ACTIVITY_PARAMS.seed``.
 ACTIVITY_SEED = 0
 
-#: ``demtrack.core.gcp_calibration.FREE_PARAMETERS`` and ``DEFAULT_FREE``.
+#: ``demtrack.core.camera.gcp_calibration.FREE_PARAMETERS`` and ``DEFAULT_FREE``.
 FREE_PARAMETERS: tuple[str, ...] = (
     "yaw",
     "tilt",

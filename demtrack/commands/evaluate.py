@@ -15,7 +15,7 @@ from .common import add_site_argument
 from .scenario import add_scenario_parameters, params_from_args
 
 if TYPE_CHECKING:
-    from demtrack.core.site import Site
+    from demtrack.core.site.folder import Site
     from demtrack.core.tracking import Track, TrackerConfig, TrackingMetrics, TruthPath
 
 __all__ = ["format_table", "plot_tracks", "register", "tracking_config"]
@@ -117,8 +117,8 @@ def _run(args: argparse.Namespace) -> int:
     if unknown:
         known = ", ".join(TRACKING_METHODS)
         raise InputFileError(f"unknown method(s) {', '.join(unknown)}; known: {known}")
-    from demtrack.core.fix_builder import build_fixes
-    from demtrack.core.site import load_site
+    from demtrack.core.geolocation.fix_builder import build_fixes
+    from demtrack.core.site.folder import load_site
     from demtrack.core.tracking import evaluate, run_tracker
     from demtrack.samplesite.scenarios import make_scenario
 

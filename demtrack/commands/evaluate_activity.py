@@ -54,7 +54,7 @@ def _case_lines(r: CaseResult) -> list[str]:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from demtrack.core.site import load_site
+    from demtrack.core.site.folder import load_site
     from demtrack.samplesite.activity_eval import evaluate_case, score_detectors
     from demtrack.samplesite.activity_scenarios import (
         DEFAULT_ACTIVITY_PARAMS,

@@ -14,11 +14,11 @@ __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
-    from demtrack.core.detections import read_detections
-    from demtrack.core.fix_builder import build_fixes, sensor_sizes
-    from demtrack.core.gap_explain import explain_track_gaps
-    from demtrack.core.site import load_site
+    from demtrack.core.geolocation.fix_builder import build_fixes, sensor_sizes
+    from demtrack.core.io.detections import read_detections
+    from demtrack.core.site.folder import load_site
     from demtrack.core.tracking import run_tracker
+    from demtrack.core.visibility.gap_explain import explain_track_gaps
 
     site = load_site(args.site)
     # With --json stdout holds only the JSON document; the read summaries go to stderr.

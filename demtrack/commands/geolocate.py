@@ -10,7 +10,7 @@ from .choices import GEOLOCATE_RULES
 from .common import add_site_argument
 
 if TYPE_CHECKING:
-    from demtrack.core.geolocate import Geolocation, GroundHit
+    from demtrack.core.geolocation.geolocate import Geolocation, GroundHit
 
 __all__ = ["geolocation_to_dict", "print_geolocation", "register"]
 
@@ -57,7 +57,7 @@ def print_geolocation(g: Geolocation) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from demtrack.core.site import load_site
+    from demtrack.core.site.folder import load_site
 
     site = load_site(args.site)
     sensor = site.sensor(args.sensor)

@@ -13,8 +13,8 @@ __all__ = ["register"]
 def _run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from demtrack.core.handoff import evaluate_handoffs
-    from demtrack.core.site import load_site
+    from demtrack.core.site.folder import load_site
+    from demtrack.core.visibility.handoff import evaluate_handoffs
     from demtrack.samplesite.scenarios import SCENARIOS, SIZES_M, make_scenario
 
     site = load_site(args.site)

@@ -22,8 +22,8 @@ from .geolocate import print_geolocation
 from .serve import add_live_arguments, live_overrides, serve_app
 
 if TYPE_CHECKING:
-    from demtrack.core.geolocate import Geolocator
-    from demtrack.core.site import Sensor, Site
+    from demtrack.core.geolocation.geolocate import Geolocator
+    from demtrack.core.site.folder import Sensor, Site
 
 __all__ = ["DEMO_SCENARIOS", "ensure_sample_site", "register"]
 
@@ -115,7 +115,7 @@ def _live(args: argparse.Namespace) -> int:
     # Cold start: the light kernels the build and the first page need compile in a child
     # beside the scan and the server imports; a second child, at the lowest CPU priority,
     # compiles the fast kernels, and the server's warm-up waits for it before it loads
-    # them and casts switch over (core.raycast.use_light_kernels); two more, at a low
+    # them and casts switch over (core.raycast.cast.use_light_kernels); two more, at a low
     # priority too, compile the live tracker's kernels, and the replay waits for them.
     warmers = KernelWarmers.start()
     server_warmer = KernelWarmers.start(["fusion", "kalman", "server"])
@@ -129,7 +129,7 @@ def _live(args: argparse.Namespace) -> int:
 
 
 def _use_light_kernels() -> None:
-    from demtrack.core.raycast import use_light_kernels
+    from demtrack.core.raycast.cast import use_light_kernels
 
     use_light_kernels(True)
 
@@ -205,7 +205,7 @@ def _serve_demo(
 
 
 def _walkthrough(args: argparse.Namespace) -> int:
-    from demtrack.core.site import load_site
+    from demtrack.core.site.folder import load_site
 
     site = load_site(ensure_sample_site(args.site))
     print(

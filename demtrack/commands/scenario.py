@@ -62,8 +62,8 @@ def _run(args: argparse.Namespace) -> int:
     suffix = out.suffix.lower()
     if suffix not in (".csv", ".jsonl", ".ndjson"):
         raise InputFileError(f"unknown detection file type {suffix!r} (use .csv or .jsonl)")
-    from demtrack.core.detections import write_detections_csv, write_detections_jsonl
-    from demtrack.core.site import load_site
+    from demtrack.core.io.detections import write_detections_csv, write_detections_jsonl
+    from demtrack.core.site.folder import load_site
     from demtrack.samplesite.scenarios import make_scenario, write_truth_json
 
     params = params_from_args(args)

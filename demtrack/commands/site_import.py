@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 from demtrack.core.errors import CameraError, SiteError
 
 if TYPE_CHECKING:
-    from demtrack.core.camera import Intrinsics
+    from demtrack.core.camera.pinhole import Intrinsics
 
 __all__ = ["register"]
 
@@ -42,8 +42,16 @@ def _geoid(args: argparse.Namespace, doc: dict | None) -> float:
 
 
 def _run_import_dem(args: argparse.Namespace) -> int:
-    from demtrack.core.crs_import import local_crs_wkt
-    from demtrack.core.dem_import import (
+    from demtrack.core.terrain.crs_import import local_crs_wkt
+    from demtrack.core.geo.geodesy import LocalFrame
+    from demtrack.core.site.folder import MANIFEST, load_site
+    from demtrack.core.site.update import (
+        new_manifest,
+        read_manifest,
+        write_dem_atomic,
+        write_manifest,
+    )
+    from demtrack.core.terrain.dem_import import (
         footprint_bounds_local,
         grid_over,
         import_dem,
@@ -51,15 +59,7 @@ def _run_import_dem(args: argparse.Namespace) -> int:
         read_raster_info,
         suggest_frame,
     )
-    from demtrack.core.geodesy import LocalFrame
-    from demtrack.core.grid import GridSpec
-    from demtrack.core.site import MANIFEST, load_site
-    from demtrack.core.site_update import (
-        new_manifest,
-        read_manifest,
-        write_dem_atomic,
-        write_manifest,
-    )
+    from demtrack.core.terrain.grid import GridSpec
 
     root: Path = args.site
     exists = (root / MANIFEST).is_file()
@@ -142,13 +142,13 @@ def _run_import_dem(args: argparse.Namespace) -> int:
 
 
 def _run_import_ortho(args: argparse.Namespace) -> int:
-    from demtrack.core.crs_import import local_crs_wkt
-    from demtrack.core.dem_import import native_cell_m, read_raster_info
-    from demtrack.core.grid import GridSpec
-    from demtrack.core.ortho_import import import_orthophoto
-    from demtrack.core.orthophoto import write_orthophoto
-    from demtrack.core.site import load_site
-    from demtrack.core.site_update import read_manifest, write_atomic, write_manifest
+    from demtrack.core.terrain.crs_import import local_crs_wkt
+    from demtrack.core.site.folder import load_site
+    from demtrack.core.site.ortho_import import import_orthophoto
+    from demtrack.core.site.orthophoto import write_orthophoto
+    from demtrack.core.site.update import read_manifest, write_atomic, write_manifest
+    from demtrack.core.terrain.dem_import import native_cell_m, read_raster_info
+    from demtrack.core.terrain.grid import GridSpec
 
     root: Path = args.site
     site = load_site(root)
@@ -178,9 +178,13 @@ def _run_import_ortho(args: argparse.Namespace) -> int:
 def _run_import_roads(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from demtrack.core.road_io import read_road_lines, read_roads_geojson, road_lines_to_geojson
-    from demtrack.core.site import load_site
-    from demtrack.core.site_update import read_manifest, write_atomic, write_manifest
+    from demtrack.core.site.folder import load_site
+    from demtrack.core.site.road_io import (
+        read_road_lines,
+        read_roads_geojson,
+        road_lines_to_geojson,
+    )
+    from demtrack.core.site.update import read_manifest, write_atomic, write_manifest
 
     root: Path = args.site
     site = load_site(root)
@@ -211,7 +215,7 @@ def _run_import_roads(args: argparse.Namespace) -> int:
 
 
 def _intrinsics(args: argparse.Namespace) -> Intrinsics:
-    from demtrack.core.camera import Intrinsics
+    from demtrack.core.camera.pinhole import Intrinsics
 
     if args.intrinsics is not None:
         try:
@@ -240,11 +244,11 @@ def _intrinsics(args: argparse.Namespace) -> Intrinsics:
 
 
 def _run_add_camera(args: argparse.Namespace) -> int:
-    from demtrack.core.camera_pose import check_camera_on_dem, pose_from_survey
-    from demtrack.core.geodesy import as_crs
-    from demtrack.core.pantilt import PanTiltHead
-    from demtrack.core.site import Sensor, load_site
-    from demtrack.core.site_update import read_manifest, write_atomic, write_manifest
+    from demtrack.core.camera.pantilt import PanTiltHead
+    from demtrack.core.camera.pose import check_camera_on_dem, pose_from_survey
+    from demtrack.core.geo.geodesy import as_crs
+    from demtrack.core.site.folder import Sensor, load_site
+    from demtrack.core.site.update import read_manifest, write_atomic, write_manifest
 
     root: Path = args.site
     site = load_site(root)

@@ -13,7 +13,7 @@ from .choices import DEFAULT_METHOD, TRACKING_METHODS
 from .common import add_site_argument
 
 if TYPE_CHECKING:
-    from demtrack.core.site import Site
+    from demtrack.core.site.folder import Site
     from demtrack.core.tracking import Track
 
 __all__ = ["DEFAULT_METHOD", "register", "track_detections"]
@@ -33,8 +33,8 @@ def _epoch(text: str | None) -> datetime | None:
 
 def track_detections(site: Site, detections_path: Path, method: str) -> list[Track]:
     """Read detections, geolocate them into fixes and track; prints what was skipped."""
-    from demtrack.core.detections import read_detections
-    from demtrack.core.fix_builder import build_fixes, sensor_sizes
+    from demtrack.core.geolocation.fix_builder import build_fixes, sensor_sizes
+    from demtrack.core.io.detections import read_detections
     from demtrack.core.tracking import run_tracker
 
     detections, ingest = read_detections(detections_path, sensors=sensor_sizes(site))
@@ -50,14 +50,14 @@ def _run(args: argparse.Namespace) -> int:
     if suffix not in SUFFIXES:
         raise InputFileError(f"unknown track file type {suffix!r} (use {', '.join(SUFFIXES)})")
     epoch = _epoch(args.epoch)
-    from demtrack.core.site import load_site
-    from demtrack.core.track_io import (
+    from demtrack.core.io.track_io import (
         write_tracks_csv,
         write_tracks_geojson,
         write_tracks_gpkg,
         write_tracks_gpx,
         write_tracks_kml,
     )
+    from demtrack.core.site.folder import load_site
 
     site = load_site(args.site)
     tracks = track_detections(site, args.detections, args.method)

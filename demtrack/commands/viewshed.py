@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from demtrack.core.target_heights import DEFAULT_TARGET_HEIGHT_M
+from demtrack.core.visibility.target_heights import DEFAULT_TARGET_HEIGHT_M
 
 from .common import add_site_argument
 
@@ -58,8 +58,8 @@ def _progress(sensor_id: str):
 def _run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from demtrack.core.site import load_site
-    from demtrack.core.visibility import blind_spots, viewshed
+    from demtrack.core.site.folder import load_site
+    from demtrack.core.visibility.viewshed import blind_spots, viewshed
 
     site = load_site(args.site)
     ids = args.sensor or list(site.sensors)

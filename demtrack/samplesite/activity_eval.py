@@ -1,7 +1,8 @@
 """Score the activity detectors on the activity cases: precision and recall per detector.
 
 The chain is the operator console's: detections -> fixes (:func:`build_fixes`) -> tracker
-(default method) -> detectors (:mod:`demtrack.core.activity`, default parameters). Detected
+(default method) -> detectors (:mod:`demtrack.core.activity.detectors`, default parameters).
+Detected
 events are matched to the case's true events (:mod:`.activity_scenarios`):
 
 - each track is assigned to a true target (:func:`~demtrack.core.tracking.metrics.match_tracks`:
@@ -24,7 +25,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from demtrack.core.activity import (
+from demtrack.core.activity.detectors import (
     ActivityEvent,
     Zone,
     detect_convoys,
@@ -32,8 +33,8 @@ from demtrack.core.activity import (
     detect_rendezvous,
     detect_zone_crossings,
 )
-from demtrack.core.fix_builder import build_fixes
-from demtrack.core.site import Site
+from demtrack.core.geolocation.fix_builder import build_fixes
+from demtrack.core.site.folder import Site
 from demtrack.core.tracking import run_tracker
 from demtrack.core.tracking.metrics import match_tracks
 

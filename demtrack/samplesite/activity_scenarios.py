@@ -42,9 +42,9 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from demtrack.core.activity import Zone
+from demtrack.core.activity.detectors import Zone
 from demtrack.core.errors import SiteError
-from demtrack.core.site import Site
+from demtrack.core.site.folder import Site
 from demtrack.core.tracking.types import TruthPath
 
 from .routes import Motion, Route, drive, offset_lane, resample_polyline, smooth_polyline

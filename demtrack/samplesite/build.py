@@ -19,17 +19,17 @@ from typing import TYPE_CHECKING
 import numpy as np
 from PIL import Image
 
-from demtrack.core.crs_import import local_crs_wkt
-from demtrack.core.dem import Dem
+from demtrack.core.camera.pantilt import wrap_deg
 from demtrack.core.errors import SiteError
-from demtrack.core.geodesy import LocalFrame
-from demtrack.core.orthophoto import write_orthophoto
-from demtrack.core.pantilt import wrap_deg
-from demtrack.core.raycast import light_kernels
-from demtrack.core.render import render_view
-from demtrack.core.road_io import write_roads_geojson
-from demtrack.core.roads import RoadNetwork
-from demtrack.core.site import MANIFEST, Sensor, site_manifest
+from demtrack.core.terrain.crs_import import local_crs_wkt
+from demtrack.core.geo.geodesy import LocalFrame
+from demtrack.core.geolocation.roads import RoadNetwork
+from demtrack.core.raycast.cast import light_kernels
+from demtrack.core.site.folder import MANIFEST, Sensor, site_manifest
+from demtrack.core.site.orthophoto import write_orthophoto
+from demtrack.core.site.render import render_view
+from demtrack.core.site.road_io import write_roads_geojson
+from demtrack.core.terrain.dem import Dem
 
 from .cameras import sighting_heads
 from .kernel_warmup import load_numba_target
@@ -60,7 +60,7 @@ def build_sample_site(
     child processes compiling the ray-casting kernels into numba's cache while the scan,
     DEM and orthophoto are made; the camera views are rendered once they are done (they
     are stopped if the build fails first), with the light kernels
-    (:func:`~demtrack.core.raycast.use_light_kernels`).
+    (:func:`~demtrack.core.raycast.cast.use_light_kernels`).
     """
     out = Path(out_dir)
     if out.exists() and any(out.iterdir()) and not (out / MANIFEST).exists():

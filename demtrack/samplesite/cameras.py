@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from demtrack.core.camera import Intrinsics
-from demtrack.core.pantilt import LandmarkReading, PanTiltHead, wrap_deg
+from demtrack.core.camera.pantilt import LandmarkReading, PanTiltHead, wrap_deg
+from demtrack.core.camera.pinhole import Intrinsics
 
 from .world import PARKING, World
 

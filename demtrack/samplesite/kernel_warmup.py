@@ -2,7 +2,7 @@
 
 On a machine with an empty numba cache the sample-site build would spend most of its time
 compiling the ray-casting kernels that render the camera views. The build renders with the
-light kernels (``core.raycast_light_kernels``: the same answers, a quarter of the compile);
+light kernels (``core.raycast._light_kernels``: the same answers, a quarter of the compile);
 each job here compiles one share of what it and a cold ``demtrack demo`` need on a tiny
 synthetic DEM, in its own process, and leaves the machine code in numba's on-disk cache;
 the build meanwhile scans the world and grids the DEM and orthophoto, then waits for the
@@ -71,9 +71,9 @@ def _tiny_scene() -> tuple[Any, np.ndarray, Any, Any]:
     """A 4 x 4 DEM, a 2 x 2 orthophoto and a small camera looking down at it."""
     import numpy as np
 
-    from demtrack.core.camera import Camera, Intrinsics
-    from demtrack.core.dem import Dem
-    from demtrack.core.grid import GridSpec
+    from demtrack.core.camera.pinhole import Camera, Intrinsics
+    from demtrack.core.terrain.dem import Dem
+    from demtrack.core.terrain.grid import GridSpec
 
     elev = np.arange(16, dtype=np.float32).reshape(4, 4)
     dem = Dem(GridSpec(0.0, 4.0, 1.0, 4, 4), elev)
@@ -86,8 +86,8 @@ def _tiny_scene() -> tuple[Any, np.ndarray, Any, Any]:
 
 
 def _job_cast() -> None:
-    from demtrack.core.raycast import light_kernels
-    from demtrack.core.render import render_view
+    from demtrack.core.raycast.cast import light_kernels
+    from demtrack.core.site.render import render_view
 
     dem, ortho, ortho_grid, camera = _tiny_scene()
     with light_kernels():  # as the build renders: the pyramid is built in numpy
@@ -95,7 +95,7 @@ def _job_cast() -> None:
 
 
 def _job_pyramid() -> None:
-    from demtrack.core.pyramid import build_pyramid
+    from demtrack.core.raycast.pyramid import build_pyramid
 
     dem, _, _, _ = _tiny_scene()
     build_pyramid(dem.elevation)
@@ -104,8 +104,8 @@ def _job_pyramid() -> None:
 def _job_server() -> None:
     import numpy as np
 
-    from demtrack.core.camera import undistort_normalized_nb
-    from demtrack.core.raycast import warm_up
+    from demtrack.core.camera.pinhole import undistort_normalized_nb
+    from demtrack.core.raycast.cast import warm_up
 
     warm_up(angular=False)  # what server.app warms at start-up, angular index excluded
     undistort_normalized_nb(np.array([0.1]), np.array([0.1]), -0.04, 0.0, 0.0, 0.0, 0.0)

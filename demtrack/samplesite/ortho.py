@@ -12,7 +12,7 @@ import numpy as np
 import shapely
 from rasterio import features
 
-from demtrack.core.grid import GridSpec
+from demtrack.core.terrain.grid import GridSpec
 
 from .world import EXTENT_M, PARKING, World
 

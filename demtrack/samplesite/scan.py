@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from demtrack.core.dem import Dem
-from demtrack.core.grid import GridSpec
+from demtrack.core.terrain.dem import Dem
+from demtrack.core.terrain.grid import GridSpec
 
 from .world import EXTENT_M, World
 

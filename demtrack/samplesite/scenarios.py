@@ -35,10 +35,10 @@ from pathlib import Path
 
 import numpy as np
 
-from demtrack.core.camera import Camera
+from demtrack.core.camera.pinhole import Camera
 from demtrack.core.errors import InputFileError, SiteError
-from demtrack.core.raycast import RayCaster
-from demtrack.core.site import Site
+from demtrack.core.raycast.cast import RayCaster
+from demtrack.core.site.folder import Site
 from demtrack.core.tracking.types import Detection, TruthPath
 
 from .routes import Motion, Route, drive, offset_lane, resample_polyline, smooth_polyline

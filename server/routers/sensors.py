@@ -5,7 +5,7 @@ from __future__ import annotations
 from fastapi import APIRouter, HTTPException
 from fastapi.responses import FileResponse
 
-from demtrack.core.site import Sensor
+from demtrack.core.site.folder import Sensor
 
 from ..footprints import footprint
 from ..models import SensorOut

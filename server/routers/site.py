@@ -8,9 +8,9 @@ import numpy as np
 from fastapi import APIRouter, HTTPException, Query, Response
 from starlette.concurrency import run_in_threadpool
 
-from demtrack.core.grid import GridSpec
-from demtrack.core.orthophoto import read_orthophoto
-from demtrack.core.road_io import roads_to_geojson
+from demtrack.core.site.orthophoto import read_orthophoto
+from demtrack.core.site.road_io import roads_to_geojson
+from demtrack.core.terrain.grid import GridSpec
 
 from ..imagery import png_bytes, relief_rgba
 from ..models import GridOut, SiteOut

@@ -1,7 +1,7 @@
 """``/api/tracks``: the tracker's tracks with time-window, class, sensor and box filters.
 
 ``/api/tracks/export?format=geojson|csv|gpx|kml|gpkg`` writes the same selection with the
-writers of :mod:`demtrack.core.track_io` (the ``demtrack track`` CLI's formats).
+writers of :mod:`demtrack.core.io.track_io` (the ``demtrack track`` CLI's formats).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from fastapi import APIRouter, HTTPException, Query
 from fastapi.responses import Response
 from starlette.concurrency import run_in_threadpool
 
-from demtrack.core.track_io import (
+from demtrack.core.io.track_io import (
     write_tracks_csv,
     write_tracks_geojson,
     write_tracks_gpkg,

@@ -1,6 +1,6 @@
 """Visibility for the map: per-sensor viewsheds as GeoJSON, the coverage raster, blind spots.
 
-Everything here is computed by :func:`demtrack.core.visibility.viewshed` (the ``"sweep"``
+Everything here is computed by :func:`demtrack.core.visibility.viewshed.viewshed` (the ``"sweep"``
 method, as ``demtrack viewshed`` does) for each sensor at its current pan and tilt, and
 kept in a small bounded cache in the server state: a parameter set is computed once.
 """
@@ -16,9 +16,9 @@ import numpy as np
 from fastapi import APIRouter, Query, Response
 from starlette.concurrency import run_in_threadpool
 
-from demtrack.core.site import Sensor
-from demtrack.core.target_heights import DEFAULT_TARGET_HEIGHT_M
-from demtrack.core.visibility import blind_spot_labels, blind_spots, viewshed
+from demtrack.core.site.folder import Sensor
+from demtrack.core.visibility.target_heights import DEFAULT_TARGET_HEIGHT_M
+from demtrack.core.visibility.viewshed import blind_spot_labels, blind_spots, viewshed
 
 from ..imagery import png_bytes
 from ..state import ConsoleState, StateDep
@@ -153,7 +153,7 @@ def blind_spot_outlines(
 
     Each area is vectorised (:func:`viewshed_multipolygon`) within its bounding window
     only, so the cost follows the areas listed, not the grid. ``labels`` is
-    :func:`~demtrack.core.visibility.blind_spot_labels` (int, DEM grid shape); the answer
+    :func:`~demtrack.core.visibility.viewshed.blind_spot_labels` (int, DEM grid shape); the answer
     is in the site frame (m) of ``transform``, edges on cell boundaries.
     """
     from rasterio.transform import Affine

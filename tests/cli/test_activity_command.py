@@ -7,8 +7,8 @@ import json
 import numpy as np
 
 from demtrack.cli import main
-from demtrack.core.activity import Zone, detect_zone_crossings
-from demtrack.core.site import load_site
+from demtrack.core.activity.detectors import Zone, detect_zone_crossings
+from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import read_truth_json
 
 

@@ -39,14 +39,14 @@ def test_cli_import_and_parsers_load_no_heavy_library(code):
 
 def test_the_probe_sees_a_heavy_import():
     # The check above can fail: importing the engine does load numba and pyproj.
-    loaded = loaded_modules("import demtrack.core.site")
+    loaded = loaded_modules("import demtrack.core.site.folder")
     assert {"numba", "pyproj"} <= loaded
 
 
 def test_copied_choices_match_their_owners():
-    from demtrack.core.gcp_calibration import DEFAULT_FREE, FREE_PARAMETERS
-    from demtrack.core.geolocate import RULES
-    from demtrack.core.site import MANIFEST
+    from demtrack.core.camera.gcp_calibration import DEFAULT_FREE, FREE_PARAMETERS
+    from demtrack.core.geolocation.geolocate import RULES
+    from demtrack.core.site.folder import MANIFEST
     from demtrack.core.tracking import METHODS
     from demtrack.samplesite.activity_scenarios import ACTIVITY_CASES, DEFAULT_ACTIVITY_PARAMS
     from demtrack.samplesite.scenarios import SCENARIOS, ScenarioParams

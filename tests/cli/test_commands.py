@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from demtrack.cli import main
-from demtrack.core.dem import Dem
-from demtrack.core.site import load_site
+from demtrack.core.site.folder import load_site
+from demtrack.core.terrain.dem import Dem
 
 
 def run(capsys, *argv):
@@ -252,8 +252,8 @@ def test_build_dem_from_laz_in_utm_lands_in_the_site_frame(
 def test_viewshed_reports_coverage_and_writes_a_raster(capsys, tmp_path, sample_site_dir):
     import rasterio
 
-    from demtrack.core.target_heights import DEFAULT_TARGET_HEIGHT_M
-    from demtrack.core.visibility import viewshed
+    from demtrack.core.visibility.target_heights import DEFAULT_TARGET_HEIGHT_M
+    from demtrack.core.visibility.viewshed import viewshed
 
     out_tif = tmp_path / "cov.tif"
     status, out, _ = run(capsys, "viewshed", "--site", str(sample_site_dir), "-o", str(out_tif))

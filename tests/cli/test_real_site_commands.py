@@ -19,8 +19,8 @@ from affine import Affine
 from pyproj import Transformer
 
 from demtrack.cli import main
-from demtrack.core.camera import Camera, Intrinsics
-from demtrack.core.site import load_site
+from demtrack.core.camera.pinhole import Camera, Intrinsics
+from demtrack.core.site.folder import load_site
 
 UTM = "EPSG:32617"
 LAT0, LON0 = 40.3573, -79.6208
@@ -154,7 +154,7 @@ def test_worked_example_ortho_roads_camera_calibrate_geolocate(capsys, site, raw
     s = load_site(site)
     assert len(s.roads) == 1 and s.roads.names == ("road 0",)
     start = np.asarray(s.roads.lines[0].coords)[0]
-    # Roads are placed at the anchor's height (see core.road_io).
+    # Roads are placed at the anchor's height (see core.site.road_io).
     e0, n0, _ = s.frame.to_enu_from_crs(X0 - 300, Y0 - 50, s.frame.h_m, UTM)
     assert np.hypot(start[0] - e0, start[1] - n0) < 1e-4
 

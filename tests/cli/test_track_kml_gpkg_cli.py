@@ -8,7 +8,7 @@ from xml.etree import ElementTree as ET
 import pytest
 
 from demtrack.cli import main
-from demtrack.core.track_io import GPKG_APPLICATION_ID, KML_NS
+from demtrack.core.io.track_io import GPKG_APPLICATION_ID, KML_NS
 
 pytestmark = pytest.mark.timeout(900)
 

@@ -7,8 +7,8 @@ import json
 import pytest
 
 from demtrack.cli import main
-from demtrack.core.fix_builder import build_fixes
-from demtrack.core.site import load_site
+from demtrack.core.geolocation.fix_builder import build_fixes
+from demtrack.core.site.folder import load_site
 from demtrack.core.tracking import evaluate, run_tracker
 from demtrack.samplesite.scenarios import make_scenario, read_truth_json
 

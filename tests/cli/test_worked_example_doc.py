@@ -20,7 +20,7 @@ import pytest
 from pyproj import Geod
 
 from demtrack.cli import main
-from demtrack.core.site import load_site
+from demtrack.core.site.folder import load_site
 
 ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "site-format.md"

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import shapely
 
-from demtrack.core.activity import (
+from demtrack.core.activity.detectors import (
     ConvoyParams,
     LoiterParams,
     RendezvousParams,

@@ -9,7 +9,7 @@ import pytest
 import shapely
 from test_activity_reference import Path, random_scene
 
-from demtrack.core.activity import _Drive, _ever_close, _project, _resample
+from demtrack.core.activity.detectors import _Drive, _ever_close, _project, _resample
 
 
 def _scene(seed: int) -> list[Path]:
@@ -68,7 +68,7 @@ def test_project_gives_shapely_bits(seed: int) -> None:
 @pytest.mark.parametrize("dt", [0.5, 1.0, 0.1, 3])
 def test_speed_equals_np_gradient(n: int, dt: float) -> None:
     """``_speed`` writes out ``np.gradient`` (uniform spacing, first-order edges)."""
-    from demtrack.core.activity import _speed
+    from demtrack.core.activity.detectors import _speed
 
     p = np.random.default_rng(n).normal(0, 50, (n, 3))
     v = np.gradient(p[:, :2], dt, axis=0)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from demtrack.core.activity import (
+from demtrack.core.activity.detectors import (
     ActivityEvent,
     ConvoyParams,
     LoiterParams,
@@ -14,7 +14,7 @@ from demtrack.core.activity import (
     detect_loitering,
     detect_rendezvous,
 )
-from demtrack.core.site import load_site
+from demtrack.core.site.folder import load_site
 from demtrack.samplesite.activity_eval import (
     DETECTORS,
     detect_all,

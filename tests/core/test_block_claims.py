@@ -1,4 +1,4 @@
-"""Dynamic block claims (core.block_claims): every block is done once, by some thread."""
+"""Dynamic block claims (core.raycast._block_claims): every block is done once, by some thread."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from numba import njit, prange
 
-from demtrack.core.block_claims import BLOCKS_PER_CLAIM, new_claims, next_block
+from demtrack.core.raycast._block_claims import BLOCKS_PER_CLAIM, new_claims, next_block
 
 
 @njit(parallel=True, cache=True)

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from demtrack.core.camera import (
+from demtrack.core.camera.pinhole import (
     Camera,
     Intrinsics,
     distort_normalized,
@@ -418,7 +418,7 @@ def test_from_dict_rejects_malformed(change):
 
 
 def test_in_view_is_in_front_and_on_the_image():
-    from demtrack.core.camera import Camera, Intrinsics
+    from demtrack.core.camera.pinhole import Camera, Intrinsics
 
     intr = Intrinsics(100.0, 100.0, 49.5, 39.5, 100, 80)
     cam = Camera.from_azimuth_tilt_roll(intr, [0.0, 0.0, 0.0], 0.0, 0.0, 0.0)

@@ -19,14 +19,14 @@ from affine import Affine
 from pyproj import Geod, Transformer
 from wgs84_twin import enu, r_enu_ecef
 
-from demtrack.core.camera import Camera, Intrinsics
-from demtrack.core.camera_pose import check_camera_on_dem, pose_from_survey, true_azimuth_deg
-from demtrack.core.dem import Dem
-from demtrack.core.dem_import import import_dem
+from demtrack.core.camera.pinhole import Camera, Intrinsics
+from demtrack.core.camera.pose import check_camera_on_dem, pose_from_survey, true_azimuth_deg
 from demtrack.core.errors import CameraError, SiteError
-from demtrack.core.geodesy import LocalFrame
-from demtrack.core.geolocate import Geolocator
-from demtrack.core.grid import GridSpec
+from demtrack.core.geo.geodesy import LocalFrame
+from demtrack.core.geolocation.geolocate import Geolocator
+from demtrack.core.terrain.dem import Dem
+from demtrack.core.terrain.dem_import import import_dem
+from demtrack.core.terrain.grid import GridSpec
 
 ANCHOR = (40.3573, -79.6208, 300.0)
 UTM = "EPSG:32617"

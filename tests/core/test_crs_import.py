@@ -16,7 +16,9 @@ from affine import Affine
 from pyproj import CRS, Transformer
 from wgs84_twin import enu
 
-from demtrack.core.crs_import import (
+from demtrack.core.errors import CrsError, DemError, InputFileError
+from demtrack.core.geo.geodesy import LocalFrame, meridian_convergence_deg
+from demtrack.core.terrain.crs_import import (
     bilinear_at_centres,
     image_to_rgba,
     local_crs_wkt,
@@ -24,9 +26,7 @@ from demtrack.core.crs_import import (
     read_raster_to_local,
     warp_to_local,
 )
-from demtrack.core.errors import CrsError, DemError, InputFileError
-from demtrack.core.geodesy import LocalFrame, meridian_convergence_deg
-from demtrack.core.grid import GridSpec
+from demtrack.core.terrain.grid import GridSpec
 
 # Bushy Run Battlefield, PA: 40.357 N, 79.621 W -> UTM zone floor((180 - 79.62) / 6) + 1 = 17.
 BUSHY_RUN = (40.3573, -79.6208, 300.0)

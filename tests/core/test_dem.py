@@ -6,9 +6,9 @@ import rasterio
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from demtrack.core.dem import Dem
 from demtrack.core.errors import DemError, DemtrackError, InputFileError
-from demtrack.core.grid import GridSpec
+from demtrack.core.terrain.dem import Dem
+from demtrack.core.terrain.grid import GridSpec
 
 
 def _reference_stats(xyz, grid):

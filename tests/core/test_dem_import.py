@@ -15,16 +15,16 @@ import rasterio
 from affine import Affine
 from pyproj import Transformer
 
-from demtrack.core.dem_import import (
+from demtrack.core.errors import CrsError, DemError, InputFileError
+from demtrack.core.geo.geodesy import LocalFrame
+from demtrack.core.terrain.dem_import import (
     footprint_bounds_local,
     grid_over,
     import_dem,
     read_raster_info,
     suggest_frame,
 )
-from demtrack.core.errors import CrsError, DemError, InputFileError
-from demtrack.core.geodesy import LocalFrame
-from demtrack.core.grid import GridSpec
+from demtrack.core.terrain.grid import GridSpec
 
 ANCHOR = (40.3573, -79.6208, 300.0)
 FTUS = 1200.0 / 3937.0

@@ -6,7 +6,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from demtrack.core.detections import (
+from demtrack.core.errors import InputFileError
+from demtrack.core.io.detections import (
     REASONS,
     read_detection_records,
     read_detections,
@@ -15,7 +16,6 @@ from demtrack.core.detections import (
     write_detections_csv,
     write_detections_jsonl,
 )
-from demtrack.core.errors import InputFileError
 from demtrack.core.tracking.types import Detection
 
 SENSORS = {"cam0": (640, 480), "cam1": (1920, 1080)}

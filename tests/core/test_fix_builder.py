@@ -5,8 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from demtrack.core.fix_builder import build_fixes, default_foot_offsets, footprint_variances
-from demtrack.core.site import load_site
+from demtrack.core.geolocation.fix_builder import (
+    build_fixes,
+    default_foot_offsets,
+    footprint_variances,
+)
+from demtrack.core.site.folder import load_site
 from demtrack.core.tracking import Detection
 from demtrack.samplesite.scenarios import (
     ScenarioParams,

@@ -7,8 +7,8 @@ import threading
 import numpy as np
 import pytest
 
-from demtrack.core import fresh_memory
-from demtrack.core.fresh_memory import without_huge_page_advice
+from demtrack.core.raycast.cast import fresh_memory
+from demtrack.core.raycast.fresh_memory import without_huge_page_advice
 
 
 @pytest.fixture

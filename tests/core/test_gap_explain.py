@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from demtrack.core.camera import Camera, Intrinsics
-from demtrack.core.dem import Dem
+from demtrack.core.camera.pinhole import Camera, Intrinsics
 from demtrack.core.errors import TrackingError
-from demtrack.core.gap_explain import explain_gap, explain_track_gaps
-from demtrack.core.grid import GridSpec
+from demtrack.core.terrain.dem import Dem
+from demtrack.core.terrain.grid import GridSpec
 from demtrack.core.tracking.types import Track, TrackPoint
+from demtrack.core.visibility.gap_explain import explain_gap, explain_track_gaps
 
 INTR = Intrinsics(60.0, 60.0, 99.5, 74.5, 200, 150)  # 118 deg wide: |y| < 1.67 x
 

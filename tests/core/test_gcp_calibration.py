@@ -13,18 +13,18 @@ import numpy as np
 import pytest
 from pyproj import Transformer
 
-from demtrack.core.camera import Camera, Intrinsics
-from demtrack.core.dem import Dem
-from demtrack.core.errors import CalibrationError, InputFileError
-from demtrack.core.gcp_calibration import (
+from demtrack.core.camera.gcp_calibration import (
     fit_camera_to_gcps,
     leave_one_out,
     parse_free,
 )
-from demtrack.core.gcp_io import Gcp, gcps_to_local, read_gcp_csv
-from demtrack.core.geodesy import LocalFrame
-from demtrack.core.grid import GridSpec
-from demtrack.core.raycast import cast_rays
+from demtrack.core.camera.gcp_io import Gcp, gcps_to_local, read_gcp_csv
+from demtrack.core.camera.pinhole import Camera, Intrinsics
+from demtrack.core.errors import CalibrationError, InputFileError
+from demtrack.core.geo.geodesy import LocalFrame
+from demtrack.core.raycast.cast import cast_rays
+from demtrack.core.terrain.dem import Dem
+from demtrack.core.terrain.grid import GridSpec
 
 TRUE_INTR = Intrinsics(1000.0, 1000.0, 639.5, 359.5, 1280, 720, k1=-0.05)
 TRUE = Camera.from_azimuth_tilt_roll(TRUE_INTR, [0.0, 0.0, 40.0], 30.0, -8.0, 1.5)

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from pyproj import Geod, Transformer
 
 from demtrack.core.errors import CrsError, GeodesyError
-from demtrack.core.geodesy import (
+from demtrack.core.geo.geodesy import (
     LocalFrame,
     horizontal_crs,
     meridian_convergence_deg,

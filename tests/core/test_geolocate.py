@@ -3,13 +3,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from demtrack.core.camera import Camera, Intrinsics
-from demtrack.core.dem import Dem
+from demtrack.core.camera.pinhole import Camera, Intrinsics
 from demtrack.core.errors import CameraError, DemtrackError
-from demtrack.core.geodesy import LocalFrame
-from demtrack.core.geolocate import RULES, Geolocation, Geolocator, GroundHit
-from demtrack.core.grid import GridSpec
-from demtrack.core.roads import RoadNetwork
+from demtrack.core.geo.geodesy import LocalFrame
+from demtrack.core.geolocation.geolocate import RULES, Geolocation, Geolocator, GroundHit
+from demtrack.core.geolocation.roads import RoadNetwork
+from demtrack.core.terrain.dem import Dem
+from demtrack.core.terrain.grid import GridSpec
 
 FRAME = LocalFrame(40.4433, -79.9436, 290.0)  # CMU, Pittsburgh: the paper's site
 INTR = Intrinsics(fx=800.0, fy=790.0, cx=319.5, cy=239.5, width=640, height=480)

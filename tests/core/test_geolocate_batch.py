@@ -7,14 +7,14 @@ import numpy as np
 import pytest
 import shapely
 
-from demtrack.core import fix_builder as fix_builder_mod
-from demtrack.core import geolocate as geolocate_mod
-from demtrack.core import raycast as raycast_mod
-from demtrack.core.fix_builder import build_fixes
-from demtrack.core.geolocate import RULES
-from demtrack.core.roads import RoadNetwork
-from demtrack.core.site import load_site
-from demtrack.core.uncertainty import hit_covariance, hit_covariances
+from demtrack.core.geolocation import fix_builder as fix_builder_mod
+from demtrack.core.geolocation import geolocate as geolocate_mod
+from demtrack.core.geolocation.fix_builder import build_fixes
+from demtrack.core.geolocation.geolocate import RULES
+from demtrack.core.geolocation.roads import RoadNetwork
+from demtrack.core.geolocation.uncertainty import hit_covariance, hit_covariances
+from demtrack.core.raycast.cast import cast as raycast_mod
+from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import make_scenario
 
 

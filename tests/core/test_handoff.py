@@ -3,13 +3,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from demtrack.core.camera import Intrinsics
-from demtrack.core.dem import Dem
-from demtrack.core.grid import GridSpec
-from demtrack.core.handoff import evaluate_handoffs, predict_handoff
-from demtrack.core.pantilt import PanTiltHead
-from demtrack.core.site import Sensor
+from demtrack.core.camera.pantilt import PanTiltHead
+from demtrack.core.camera.pinhole import Intrinsics
+from demtrack.core.site.folder import Sensor
+from demtrack.core.terrain.dem import Dem
+from demtrack.core.terrain.grid import GridSpec
 from demtrack.core.tracking.types import TruthPath
+from demtrack.core.visibility.handoff import evaluate_handoffs, predict_handoff
 
 INTR = Intrinsics(320.0, 320.0, 319.5, 239.5, 640, 480)  # 90 deg horizontal field of view
 
@@ -97,8 +97,8 @@ def test_a_handoff_soon_after_takeover_is_scored_from_the_takeover():
 def test_many_targets_at_once_get_each_ones_own_prediction(sample_site_dir):
     """predict_handoffs (one visibility call per camera and height) equals
     predict_handoff target by target, on the sample site's terrain and roads."""
-    from demtrack.core.handoff import HandoffTarget, predict_handoffs
-    from demtrack.core.site import load_site
+    from demtrack.core.site.folder import load_site
+    from demtrack.core.visibility.handoff import HandoffTarget, predict_handoffs
 
     site = load_site(sample_site_dir)
     rng = np.random.default_rng(3)

@@ -11,7 +11,7 @@ import demtrack.core
 
 def test_core_imports_without_web_packages():
     modules = [m.name for m in pkgutil.walk_packages(demtrack.core.__path__, "demtrack.core.")]
-    assert "demtrack.core.raycast" in modules and "demtrack.core.tracking.tracker" in modules
+    assert "demtrack.core.raycast.cast" in modules and "demtrack.core.tracking.tracker" in modules
     code = (
         "import importlib, sys\n"
         f"for name in {modules!r}:\n"

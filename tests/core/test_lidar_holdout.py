@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 from pyproj import Transformer
 
-from demtrack.core.crs_import import points_to_local
-from demtrack.core.dem import Dem
-from demtrack.core.geodesy import LocalFrame
-from demtrack.core.pointcloud import GROUND_CLASS, read_point_cloud
+from demtrack.core.geo.geodesy import LocalFrame
+from demtrack.core.terrain.crs_import import points_to_local
+from demtrack.core.terrain.dem import Dem
+from demtrack.core.terrain.pointcloud import GROUND_CLASS, read_point_cloud
 
 ANCHOR = (40.3573, -79.6208, 300.0)
 NOISE_M = 0.03

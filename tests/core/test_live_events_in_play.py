@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from test_activity_reference import random_scene
 
-from demtrack.core.site import load_site
+from demtrack.core.site.folder import load_site
 from demtrack.core.tracking.types import Track, TrackPoint
 from demtrack.server.live_events import LiveEventParams, LiveEvents
 

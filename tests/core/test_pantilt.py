@@ -6,14 +6,14 @@ import math
 import numpy as np
 import pytest
 
-from demtrack.core.camera import Intrinsics
-from demtrack.core.errors import CalibrationError, CameraError
-from demtrack.core.pantilt import (
+from demtrack.core.camera.pantilt import (
     LandmarkReading,
     PanTiltHead,
     calibrate_mount_yaw,
     wrap_deg,
 )
+from demtrack.core.camera.pinhole import Intrinsics
+from demtrack.core.errors import CalibrationError, CameraError
 
 INTR = Intrinsics(1200.0, 1200.0, 639.5, 359.5, 1280, 720, k1=-0.1, k2=0.02)
 HEAD_ENU = np.array([120.0, -40.0, 312.5])

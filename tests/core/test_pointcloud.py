@@ -5,7 +5,7 @@ import pytest
 from pyproj import CRS
 
 from demtrack.core.errors import InputFileError
-from demtrack.core.pointcloud import read_point_cloud
+from demtrack.core.terrain.pointcloud import read_point_cloud
 
 
 @pytest.mark.parametrize("suffix", [".las", ".laz"])

@@ -13,7 +13,7 @@ import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from demtrack.core.polyline_kernels import project_points_kernel, project_points_reference
+from demtrack.core.activity._polyline_kernels import project_points_kernel, project_points_reference
 
 
 def _kernel(line_xy: np.ndarray, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

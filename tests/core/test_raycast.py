@@ -10,11 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import brentq
 
-from demtrack.core import raycast_kernels as kernels
 from demtrack.core.errors import DemError, DemtrackError, RaycastError
-from demtrack.core.grid import GridSpec
-from demtrack.core.pyramid import build_pyramid
-from demtrack.core.raycast import (
+from demtrack.core.raycast.cast import (
     BELOW_GROUND,
     HIT,
     MISS,
@@ -26,8 +23,11 @@ from demtrack.core.raycast import (
     cast_rays,
     warm_up,
 )
-from demtrack.core.raycast_reference import cast_rays_reference, pyramid_reference
-from demtrack.core.surface import bilinear_sample
+from demtrack.core.raycast.cast import _kernels as kernels
+from demtrack.core.raycast.pyramid import build_pyramid
+from demtrack.core.raycast.reference import cast_rays_reference, pyramid_reference
+from demtrack.core.terrain.grid import GridSpec
+from demtrack.core.terrain.surface import bilinear_sample
 
 
 @dataclass(frozen=True)
@@ -459,7 +459,7 @@ def test_thread_count_does_not_change_answers():
 
 
 def test_ray_caster_reuse_and_real_dem():
-    from demtrack.core.dem import Dem
+    from demtrack.core.terrain.dem import Dem
 
     rng = np.random.default_rng(5)
     fake = random_dem(rng)

@@ -1,4 +1,4 @@
-"""Origin-specific angular index (core.angular_index): conservative, exact, cached."""
+"""Origin-specific angular index (core.raycast.angular_index): conservative, exact, cached."""
 
 from __future__ import annotations
 
@@ -9,30 +9,30 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from demtrack.core import angular_kernels as ak
-from demtrack.core.angular_index import (
+from demtrack.core.errors import RaycastError
+from demtrack.core.raycast.angular_index import (
     AngularCache,
     _cone,
     build_angular_index,
     needed_azimuth_bins,
     tree_levels,
 )
-from demtrack.core.errors import RaycastError
-from demtrack.core.grid import GridSpec
-from demtrack.core.raycast import (
+from demtrack.core.raycast.cast import (
     BELOW_GROUND,
     HEIGHT_MARGIN_M,
     MIN_COHERENT_RUN,
     RayCaster,
     RayHits,
 )
-from demtrack.core.raycast_reference import (
+from demtrack.core.raycast.cast import _angular_kernels as ak
+from demtrack.core.raycast.reference import (
     angular_leaves_reference,
     cast_rays_reference,
     next_candidate_reference,
     pseudo_angle_reference,
 )
-from demtrack.core.surface import bilinear_sample
+from demtrack.core.terrain.grid import GridSpec
+from demtrack.core.terrain.surface import bilinear_sample
 
 
 @dataclass(frozen=True)
@@ -407,7 +407,7 @@ def test_set_up_lanes_match_the_scalar_set_up_to_the_bit(where):
     """A run's vectorised set-up (``_set_up_lanes``) gives every ray the scalar
     ``_prepare`` + ``_store_lane`` answers, bit for bit, on awkward rays: axis-aligned,
     level, vertical, tiny components, zero and finite ranges, origins off the DEM."""
-    from demtrack.core.raycast_kernels import BLOCK, HIT, SCRATCH_ROWS, _prepare
+    from demtrack.core.raycast._kernels import BLOCK, HIT, SCRATCH_ROWS, _prepare
 
     rng = np.random.default_rng(11)
     dem = random_dem(rng, holes=False, nrows=17, ncols=23)

@@ -8,9 +8,7 @@ import numpy as np
 import pytest
 from raycast_checks import assert_identical_hits
 
-from demtrack.core import raycast
-from demtrack.core.grid import GridSpec
-from demtrack.core.raycast import (
+from demtrack.core.raycast.cast import (
     RayCaster,
     cast_rays,
     light_kernels,
@@ -18,7 +16,9 @@ from demtrack.core.raycast import (
     use_light_kernels,
     warm_up,
 )
-from demtrack.core.raycast_reference import cast_rays_reference
+from demtrack.core.raycast.cast import cast as raycast
+from demtrack.core.raycast.reference import cast_rays_reference
+from demtrack.core.terrain.grid import GridSpec
 
 
 @dataclass(frozen=True)

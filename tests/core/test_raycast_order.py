@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from raycast_checks import assert_identical_hits
 
-from demtrack.core import raycast
-from demtrack.core import raycast_kernels as kernels
-from demtrack.core.grid import GridSpec
-from demtrack.core.raycast import RayCaster
+from demtrack.core.raycast.cast import RayCaster
+from demtrack.core.raycast.cast import _kernels as kernels
+from demtrack.core.raycast.cast import cast as raycast
+from demtrack.core.terrain.grid import GridSpec
 
 
 @dataclass(frozen=True)

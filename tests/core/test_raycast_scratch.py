@@ -12,8 +12,8 @@ import pytest
 from raycast_checks import HIT_FIELDS, assert_identical_hits
 
 from demtrack.bench.synthetic_terrain import camera_rays, incoherent_rays, synthetic_dem
-from demtrack.core import raycast as rc
-from demtrack.core.raycast import RayCaster, RayHits, light_kernels
+from demtrack.core.raycast.cast import RayCaster, RayHits, light_kernels
+from demtrack.core.raycast.cast import cast as rc
 
 
 @pytest.fixture(scope="module")

@@ -3,12 +3,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from demtrack.core.camera import Camera, Intrinsics
-from demtrack.core.dem import Dem
+from demtrack.core.camera.pinhole import Camera, Intrinsics
 from demtrack.core.errors import InputFileError
-from demtrack.core.grid import GridSpec
-from demtrack.core.orthophoto import read_orthophoto, write_orthophoto
-from demtrack.core.render import SKY_HORIZON, SKY_ZENITH, render_view
+from demtrack.core.site.orthophoto import read_orthophoto, write_orthophoto
+from demtrack.core.site.render import SKY_HORIZON, SKY_ZENITH, render_view
+from demtrack.core.terrain.dem import Dem
+from demtrack.core.terrain.grid import GridSpec
 
 RED, BLUE = (200, 20, 20), (20, 20, 200)
 

@@ -12,7 +12,7 @@ import shapely
 from pyproj import Transformer
 
 from demtrack.core.errors import CrsError, InputFileError
-from demtrack.core.road_io import gpkg_geometry_wkb, read_road_lines
+from demtrack.core.site.road_io import gpkg_geometry_wkb, read_road_lines
 
 XY = np.array([[589_000.0, 4_467_000.0], [589_250.5, 4_467_120.25], [589_400.0, 4_467_500.0]])
 LON, LAT = Transformer.from_crs("EPSG:32617", "EPSG:4326", always_xy=True).transform(

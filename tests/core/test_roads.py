@@ -7,10 +7,10 @@ import pytest
 import shapely
 from shapely import LineString, Point
 
-from demtrack.core.dem import Dem
 from demtrack.core.errors import DemtrackError, InputFileError
-from demtrack.core.grid import GridSpec
-from demtrack.core.roads import RoadCandidate, RoadNetwork
+from demtrack.core.geolocation.roads import RoadCandidate, RoadNetwork
+from demtrack.core.terrain.dem import Dem
+from demtrack.core.terrain.grid import GridSpec
 
 
 def plane_dem(a=0.0, b=0.0, c=0.0, bounds=(-100.0, -20.0, 100.0, 300.0), cell=2.0) -> Dem:
@@ -236,7 +236,7 @@ def test_names_or_widths_of_the_wrong_length_are_rejected():
 
 
 def test_clipping_to_a_box_keeps_exactly_the_part_inside():
-    from demtrack.core.roads import _clip_to_box
+    from demtrack.core.geolocation.roads import _clip_to_box
 
     rng = np.random.default_rng(3)
     box = (-10.0, -5.0, 20.0, 15.0)

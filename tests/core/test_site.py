@@ -6,15 +6,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from demtrack.core.camera import Intrinsics
-from demtrack.core.dem import Dem
+from demtrack.core.camera.pantilt import LandmarkReading, PanTiltHead
+from demtrack.core.camera.pinhole import Intrinsics
 from demtrack.core.errors import SiteError
-from demtrack.core.geodesy import LocalFrame
-from demtrack.core.grid import GridSpec
-from demtrack.core.pantilt import LandmarkReading, PanTiltHead
-from demtrack.core.road_io import write_roads_geojson
-from demtrack.core.roads import RoadNetwork
-from demtrack.core.site import Sensor, load_site, site_manifest
+from demtrack.core.geo.geodesy import LocalFrame
+from demtrack.core.geolocation.roads import RoadNetwork
+from demtrack.core.site.folder import Sensor, load_site, site_manifest
+from demtrack.core.site.road_io import write_roads_geojson
+from demtrack.core.terrain.dem import Dem
+from demtrack.core.terrain.grid import GridSpec
 
 FRAME = LocalFrame(40.3556, -79.6225, 331.0)
 

@@ -10,11 +10,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from demtrack.core import geodesy
 from demtrack.core.errors import GeodesyError
-from demtrack.core.geodesy import LocalFrame
-from demtrack.core.site import load_site
-from demtrack.core.surface import bilinear_sample
+from demtrack.core.geo import geodesy
+from demtrack.core.geo.geodesy import LocalFrame
+from demtrack.core.site.folder import load_site
+from demtrack.core.terrain.surface import bilinear_sample
 
 
 @pytest.fixture(scope="module")

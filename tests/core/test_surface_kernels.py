@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from demtrack.core import surface
-from demtrack.core.surface import bilinear_sample, bilinear_sample_reference
+from demtrack.core.terrain import surface
+from demtrack.core.terrain.surface import bilinear_sample, bilinear_sample_reference
 
 
 def _grid(

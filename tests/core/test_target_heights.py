@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import inspect
 
-from demtrack.core.target_heights import (
+from demtrack.core.visibility.target_heights import (
     DEFAULT_TARGET_HEIGHT_M,
     TARGET_HEIGHT_M,
     target_height_for,
 )
-from demtrack.core.visibility import viewshed
+from demtrack.core.visibility.viewshed import viewshed
 from demtrack.server.routers import visibility as visibility_router
 
 

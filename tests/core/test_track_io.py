@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from demtrack.core.errors import TrackingError
-from demtrack.core.track_io import (
+from demtrack.core.io.track_io import (
     GPX_NS,
     TRACK_CSV_COLUMNS,
     iso_utc,

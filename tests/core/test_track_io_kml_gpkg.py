@@ -16,7 +16,7 @@ import pytest
 import shapely
 
 from demtrack.core.errors import TrackingError
-from demtrack.core.track_io import (
+from demtrack.core.io.track_io import (
     GPKG_APPLICATION_ID,
     KML_NS,
     write_tracks_gpkg,

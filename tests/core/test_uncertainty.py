@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from demtrack.core.uncertainty import hit_covariance
+from demtrack.core.geolocation.uncertainty import hit_covariance
 
 
 def unit(v) -> np.ndarray:

@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 
 from demtrack.bench.synthetic_terrain import synthetic_dem
-from demtrack.core.camera import Camera, Intrinsics
-from demtrack.core.dem import Dem
+from demtrack.core.camera.pinhole import Camera, Intrinsics
 from demtrack.core.errors import CameraError
-from demtrack.core.grid import GridSpec
-from demtrack.core.viewshed_kernels import sweep_margin_kernel
-from demtrack.core.viewshed_reference import sweep_margin_reference
-from demtrack.core.visibility import PanTiltLimits, viewshed
+from demtrack.core.terrain.dem import Dem
+from demtrack.core.terrain.grid import GridSpec
+from demtrack.core.visibility._viewshed_kernels import sweep_margin_kernel
+from demtrack.core.visibility.reference import sweep_margin_reference
+from demtrack.core.visibility.viewshed import PanTiltLimits, viewshed
 
 INTR = Intrinsics(100.0, 100.0, 99.5, 74.5, 200, 150)
 ALL_ROUND = PanTiltLimits(tilt_min_deg=-90.0, tilt_max_deg=90.0)

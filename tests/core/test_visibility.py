@@ -3,11 +3,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from demtrack.core.camera import Camera, Intrinsics
-from demtrack.core.dem import Dem
+from demtrack.core.camera.pinhole import Camera, Intrinsics
 from demtrack.core.errors import CameraError
-from demtrack.core.grid import GridSpec
-from demtrack.core.visibility import PanTiltLimits, blind_spot_labels, blind_spots, viewshed
+from demtrack.core.terrain.dem import Dem
+from demtrack.core.terrain.grid import GridSpec
+from demtrack.core.visibility.viewshed import (
+    PanTiltLimits,
+    blind_spot_labels,
+    blind_spots,
+    viewshed,
+)
 
 INTR = Intrinsics(100.0, 100.0, 99.5, 74.5, 200, 150)
 
@@ -147,7 +152,7 @@ def test_blind_spots_are_connected_areas_largest_first():
 
 
 def test_target_behind_a_wall_is_partly_then_fully_visible_as_it_grows():
-    from demtrack.core.visibility import target_visible_fraction
+    from demtrack.core.visibility.viewshed import target_visible_fraction
 
     dem = plane()
     z = np.array(dem.elevation)

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from demtrack.core.errors import InputFileError
-from demtrack.core.geodesy import LocalFrame
-from demtrack.core.zone_io import read_zones_geojson
+from demtrack.core.geo.geodesy import LocalFrame
+from demtrack.core.site.zone_io import read_zones_geojson
 
 FRAME = LocalFrame(40.3556, -79.6225, 331.0)
 

@@ -1,6 +1,6 @@
 """An independent WGS84 twin for tests: geodetic -> ECEF -> local ENU by the textbook formulas.
 
-NIMA TR8350.2 constants, written out here so that tests of ``demtrack.core.geodesy`` and of
+NIMA TR8350.2 constants, written out here so that tests of ``demtrack.core.geo.geodesy`` and of
 everything built on it (CRS imports, surveyed camera poses) compare against code that does not
 share a line with the implementation.
 """

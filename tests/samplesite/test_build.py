@@ -5,9 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from demtrack.core.dem import Dem
-from demtrack.core.orthophoto import read_orthophoto
-from demtrack.core.site import load_site
+from demtrack.core.site.folder import load_site
+from demtrack.core.site.orthophoto import read_orthophoto
+from demtrack.core.terrain.dem import Dem
 from demtrack.samplesite.cameras import sighting_heads
 from demtrack.samplesite.scan import coarse_dem, simulate_laser_scan
 from demtrack.samplesite.world import make_world

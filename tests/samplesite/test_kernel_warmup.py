@@ -19,9 +19,9 @@ from numba.core.dispatcher import Dispatcher
 from demtrack.core import (
     angular_kernels, camera, raycast, raycast_kernels, raycast_light_kernels, viewshed_kernels
 )
-from demtrack.core.dem import Dem
-from demtrack.core.grid import GridSpec
-from demtrack.core.site import load_site
+from demtrack.core.terrain.dem import Dem
+from demtrack.core.terrain.grid import GridSpec
+from demtrack.core.site.folder import load_site
 from demtrack.samplesite.build import build_sample_site
 from demtrack.samplesite.kernel_warmup import run_job
 from demtrack.server.footprints import footprint

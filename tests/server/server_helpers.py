@@ -56,7 +56,7 @@ def vehicle_run_pipeline(site_dir: Path, tmp: Path, until_s: float):
     """A started kalman ``Pipeline`` on a fresh store, and the ``vehicle-run`` scenario's
     detection records before ``until_s`` (not yet ingested): ``(site, pipeline, records)``.
     """
-    from demtrack.core.site import load_site
+    from demtrack.core.site.folder import load_site
     from demtrack.samplesite.scenarios import make_scenario
     from demtrack.server.db import Store
     from demtrack.server.pipeline import Pipeline

@@ -6,8 +6,8 @@ import numpy as np
 from PIL import Image
 from server_helpers import AUTH
 
-from demtrack.core.orthophoto import read_orthophoto
-from demtrack.core.site import load_site
+from demtrack.core.site.folder import load_site
+from demtrack.core.site.orthophoto import read_orthophoto
 
 
 def test_site_metadata_describes_frame_grid_and_datum(ro_client, sample_site_dir):

@@ -15,8 +15,8 @@ import pytest
 from fastapi.testclient import TestClient
 from server_helpers import AUTH, make_app, post_in_time_batches
 
-from demtrack.core.site import load_site
-from demtrack.core.track_io import GPX_NS, KML_NS
+from demtrack.core.io.track_io import GPX_NS, KML_NS
+from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import make_scenario
 from demtrack.server.routers.synopsis import synopsis, trajectory
 

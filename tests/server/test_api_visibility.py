@@ -1,4 +1,4 @@
-"""The visibility endpoints against :func:`demtrack.core.visibility.viewshed` itself.
+"""The visibility endpoints against :func:`demtrack.core.visibility.viewshed.viewshed` itself.
 
 Oracles: the GeoJSON polygons rasterised back (rasterio, cell-centre rule) give exactly
 the viewshed mask; the coverage PNG decoded through its legend gives the sensor count per
@@ -17,8 +17,8 @@ from scipy import ndimage
 from server_helpers import AUTH
 from shapely.geometry import shape
 
-from demtrack.core.site import load_site
-from demtrack.core.visibility import blind_spots, viewshed
+from demtrack.core.site.folder import load_site
+from demtrack.core.visibility.viewshed import blind_spots, viewshed
 
 
 @pytest.fixture(scope="module")

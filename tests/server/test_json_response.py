@@ -18,7 +18,7 @@ from fastapi.testclient import TestClient
 from pydantic import TypeAdapter
 from server_helpers import AUTH, make_app, post_in_time_batches, walk
 
-from demtrack.core.site import load_site
+from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import make_scenario
 from demtrack.server.db import encode_json
 from demtrack.server.json_response import json_response

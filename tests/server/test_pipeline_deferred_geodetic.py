@@ -11,7 +11,7 @@ import json
 import numpy as np
 from server_helpers import vehicle_run_pipeline
 
-from demtrack.core.fix_builder import build_fixes
+from demtrack.core.geolocation.fix_builder import build_fixes
 
 
 def test_deferred_geodetic_fields_equal_those_of_their_own_call(sample_site_dir, tmp_path):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from server_helpers import vehicle_run_pipeline
 
-from demtrack.core.site import load_site
+from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import make_scenario
 from demtrack.server.db import Store
 from demtrack.server.pipeline import Pipeline, fix_from_body
@@ -20,7 +20,7 @@ def test_live_fixes_equal_the_stored_bodies_fixes(sample_site_dir, tmp_path):
     site, p, records = vehicle_run_pipeline(sample_site_dir, tmp_path, until_s=6.0)
     validated, _ = p._validate(records)
     pending = list(enumerate(validated, start=1))
-    from demtrack.core.fix_builder import build_fixes
+    from demtrack.core.geolocation.fix_builder import build_fixes
 
     fixes, _ = build_fixes(site, validated)
     bodies, _ = p._fix_bodies(pending, fixes)  # geodetic fields unfilled: not read back
@@ -70,7 +70,7 @@ def test_live_tracks_equal_the_offline_tracker_on_the_same_detections(sample_sit
     """Oracle: the server's tracker, fed batch by batch through ingest, store and reorder
     buffer, makes the tracks ``run_tracker`` makes from ``build_fixes`` offline (what
     ``demtrack track`` does) - hit covariances included, so the live tracks are as good."""
-    from demtrack.core.fix_builder import build_fixes
+    from demtrack.core.geolocation.fix_builder import build_fixes
     from demtrack.core.tracking import build_tracker
 
     site = load_site(sample_site_dir)

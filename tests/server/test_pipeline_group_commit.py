@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from demtrack.core.site import load_site
+from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import make_scenario
 from demtrack.server.db import Store
 from demtrack.server.pipeline import Pipeline

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from demtrack.core.site import load_site
+from demtrack.core.site.folder import load_site
 from demtrack.server.db import Store
 from demtrack.server.live_events import LiveEventParams
 from demtrack.server.pipeline import Pipeline

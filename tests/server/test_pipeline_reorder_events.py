@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from server_helpers import walk
 
-from demtrack.core.activity import LoiterParams
-from demtrack.core.site import load_site
+from demtrack.core.activity.detectors import LoiterParams
+from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import make_scenario
 from demtrack.server.db import Store
 from demtrack.server.live_events import LiveEventParams

@@ -14,7 +14,7 @@ from fastapi.testclient import TestClient
 from server_helpers import AUTH, make_app
 
 from demtrack.core.errors import SiteError
-from demtrack.core.site import load_site
+from demtrack.core.site.folder import load_site
 from demtrack.core.tracking.types import Detection
 from demtrack.samplesite.scenarios import make_scenario
 from demtrack.server.replay import (

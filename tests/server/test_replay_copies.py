@@ -7,7 +7,7 @@ import itertools
 import pytest
 from server_helpers import make_app
 
-from demtrack.core.site import load_site
+from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import ScenarioParams, make_scenario
 from demtrack.server.replay import LOOP_GAP_S, scenario_frames, scenario_stream
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from demtrack.core.site import load_site
+from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import ScenarioParams, make_scenario
 from demtrack.server.replay import LOOP_GAP_S, scenario_stream
 from demtrack.server.replay_schedule import commensurate_periods, replay_schedule

@@ -12,9 +12,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from demtrack.core.dem import Dem
-from demtrack.core.grid import GridSpec
-from demtrack.core.site import load_site
+from demtrack.core.site.folder import load_site
+from demtrack.core.terrain.dem import Dem
+from demtrack.core.terrain.grid import GridSpec
 from demtrack.server import scene3d
 from demtrack.server.messages import FixMessage, TrackUpdateMessage
 from demtrack.server.scene3d import (

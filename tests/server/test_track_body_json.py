@@ -16,7 +16,7 @@ from typing import Any
 
 import pytest
 
-from demtrack.core.site import load_site
+from demtrack.core.site.folder import load_site
 from demtrack.server import db
 from demtrack.server.db import Store, dumps_json, track_body_text
 from demtrack.server.pipeline import Pipeline

@@ -13,7 +13,7 @@ import pytest
 from fastapi.testclient import TestClient
 from server_helpers import AUTH, make_app, walk
 
-from demtrack.core.site import load_site
+from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import make_scenario
 from demtrack.server import db
 from demtrack.server.db import Store, loads_json

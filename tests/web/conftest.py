@@ -39,7 +39,7 @@ def ol_installed() -> Path:
 @pytest.fixture(scope="session")
 def scenario_records(sample_site_dir: Path) -> list[dict[str, Any]]:
     """The scenario's detection records (the ingest format), in time order."""
-    from demtrack.core.site import load_site
+    from demtrack.core.site.folder import load_site
     from demtrack.samplesite.scenarios import make_scenario
 
     scenario = make_scenario(load_site(sample_site_dir), SCENARIO)

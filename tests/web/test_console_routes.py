@@ -10,7 +10,7 @@ import pytest
 from starlette.testclient import TestClient
 from web_helpers import AUTH, OL_JS, TOKEN
 
-from demtrack.core.site import load_site
+from demtrack.core.site.folder import load_site
 from demtrack.server.app import create_app
 
 

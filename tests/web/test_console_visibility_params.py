@@ -1,6 +1,7 @@
 """The visibility layers' parameter group (target height, range) in a real browser.
 
-Oracles: ``core.target_heights`` (the target presets), the visibility endpoints asked with
+Oracles: ``core.visibility.target_heights`` (the target presets), the visibility endpoints asked
+with
 the same parameters (blind-spot outlines and centroids, viewshed polygons), the server's
 own 422 message for a value it refuses, and the requests the page sent.
 """
@@ -12,7 +13,7 @@ from urllib.parse import parse_qs, urlsplit
 import pytest
 from web_helpers import SHOTS, open_console
 
-from demtrack.core.target_heights import TARGET_HEIGHT_M
+from demtrack.core.visibility.target_heights import TARGET_HEIGHT_M
 
 pytestmark = pytest.mark.timeout(600)
 
@@ -51,7 +52,7 @@ def set_params(page, target: str, height: str | None, range_m: str) -> None:
 def test_target_height_and_range_reach_every_layer_and_the_drawn_outlines(page, server_factory):
     srv = server_factory("visparams")
     open_console(page, srv)
-    # The presets are core.target_heights' table; a preset fixes the height field.
+    # The presets are core.visibility.target_heights' table; a preset fixes the height field.
     options = page.evaluate(
         "[...document.querySelectorAll('#vis-target option')].map((o) => [o.value, o.text])"
     )

@@ -27,7 +27,7 @@ import { el, fmt } from "./util.mjs";
 
 /** Outline colours of the sensors, by sorted id (the 3D scene's frustum colours). */
 export const SENSOR_COLOURS = ["#ffd700", "#00c8ff", "#ff69b4", "#a0ff78"];
-/** Target classes, as core/target_heights.py TARGET_HEIGHT_M (a browser test checks the copy). */
+/** Target classes, as core/visibility/target_heights.py TARGET_HEIGHT_M (a browser test checks the copy). */
 export const TARGETS = [
   { cls: "human", label: "person", height_m: 1.7 },
   { cls: "vehicle", label: "car", height_m: 1.5 },

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from demtrack.core.tracking.fusion_kernels import screen_pairs_kernel, triangulation_cov_kernel
-from demtrack.core.tracking.fusion_reference import (
+from demtrack.core.tracking.reference import (
     screen_pairs_reference,
     triangulation_cov_reference,
 )

@@ -11,13 +11,13 @@ from demtrack.core.tracking.kalman_kernels import (
     smoother_gain_kernel,
     update_kernel,
 )
-from demtrack.core.tracking.kalman_reference import (
+from demtrack.core.tracking.motion import ConstantVelocity
+from demtrack.core.tracking.reference import (
     predict_reference,
     rts_positions_reference,
     smoother_gain_reference,
     update_reference,
 )
-from demtrack.core.tracking.motion import ConstantVelocity
 
 
 def _spd(rng, n):

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import tracking_synthetic as syn
 
 from demtrack.core.tracking import build_tracker
-from demtrack.core.tracking import synthetic as syn
 from demtrack.core.tracking.tracker import find_gaps
 from demtrack.core.tracking.types import Track
 

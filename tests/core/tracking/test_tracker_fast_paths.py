@@ -15,8 +15,9 @@ from demtrack.core.tracking.fusion import (
     _screen_pairs,
     _triangulate_screened,
 )
-from demtrack.core.tracking.hypothesiser_kernels import gate_kernel, gate_reference
+from demtrack.core.tracking.hypothesiser_kernels import gate_kernel
 from demtrack.core.tracking.protocols import MissedDetection, SingleHypothesis
+from demtrack.core.tracking.reference import gate_reference
 from demtrack.core.tracking.tracker import _nearest_height
 
 

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import tracking_synthetic as syn
+
 from demtrack.core.tracking import TrackerConfig, build_tracker
-from demtrack.core.tracking import synthetic as syn
 
 
 def test_ended_after_keeps_live_tracks_and_recent_ended_ones():

@@ -19,8 +19,8 @@ from demtrack.bench.dense_tracking import (
     score_dense,
     track_dense,
 )
-from demtrack.core.fix_builder import build_fixes
-from demtrack.core.site import load_site
+from demtrack.core.geolocation.fix_builder import build_fixes
+from demtrack.core.site.folder import load_site
 from demtrack.core.tracking import TrackerConfig
 from demtrack.core.tracking.fusion import pair_cost
 from demtrack.core.tracking.kalman import GaussianState, KalmanFilter

@@ -5,10 +5,10 @@ from functools import cache
 
 import numpy as np
 import pytest
+import tracking_synthetic as syn
 
 from demtrack.core.errors import TrackingError
 from demtrack.core.tracking import METHODS, TrackerConfig, build_tracker, run_tracker
-from demtrack.core.tracking import synthetic as syn
 from demtrack.core.tracking.metrics import count_fix_jumps, evaluate
 from demtrack.core.tracking.types import Fix
 
@@ -217,7 +217,7 @@ def test_fixes_without_hits_are_counted_and_skipped():
 
 
 def test_roads_may_be_any_object_holding_lines():
-    class SiteRoads:  # like demtrack.core.roads.RoadNetwork
+    class SiteRoads:  # like demtrack.core.geolocation.roads.RoadNetwork
         def __init__(self, lines):
             self.lines = tuple(lines)
 

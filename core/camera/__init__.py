@@ -1,0 +1,7 @@
+"""Cameras.
+
+The OpenCV pinhole and lens-distortion model (pixel to ray, point to pixel), pan-tilt heads
+and their landmark yaw calibration, camera poses surveyed in projected CRSs, and camera fits
+to ground control points. May import ``core.raycast``, ``core.terrain``, ``core.geo`` and
+``core.errors``.
+"""
