@@ -43,6 +43,7 @@ if TYPE_CHECKING:
     from demtrack.core.tracking import Fix, Track, TrackingMetrics, TruthPath
     from demtrack.core.tracking.protocols import Measurement
     from demtrack.core.tracking.types import Detection
+    from demtrack.server.scenario_source import ScenarioSource
 
 __all__ = [
     "SCENARIOS",
@@ -92,8 +93,12 @@ def dense_scene(
     loops: int = 1,
     gap_s: float | None = None,
     rate_hz: float | None = None,
+    source: ScenarioSource | None = None,
 ) -> DenseScene:
     """The scene :func:`~demtrack.server.replay.scenario_stream` replays from time 0.
+
+    ``source`` makes the scenarios (default: the sample site's,
+    :data:`~demtrack.samplesite.replay_source.SAMPLE_SCENARIOS`).
 
     Copy ``k`` of a scenario has noise seed ``k``; loop periods and start offsets come
     from :func:`~demtrack.server.replay_schedule.replay_schedule` (``gap_s`` default:
@@ -101,6 +106,7 @@ def dense_scene(
     is shifted by ``offsets[j][k] + l * periods[j]``.
     """
     from demtrack.core.tracking import TruthPath
+    from demtrack.samplesite.replay_source import SAMPLE_SCENARIOS
     from demtrack.server.replay import LOOP_GAP_S, scenario_copies
     from demtrack.server.replay_schedule import replay_schedule
 
@@ -108,7 +114,9 @@ def dense_scene(
     dets: list[Detection] = []
     truths: list[TruthPath] = []
     labels: dict[int, str] = {}
-    made_all, rate = scenario_copies(site, names, copies, rate_hz)
+    made_all, rate = scenario_copies(
+        site, names, copies, rate_hz, source=SAMPLE_SCENARIOS if source is None else source
+    )
     played = [(name, made) for name, made in made_all if made[0].detections]
     periods, offsets = replay_schedule(
         [max(d.t_s for d in made[0].detections) for _, made in played],

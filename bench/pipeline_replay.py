@@ -4,9 +4,9 @@ The soak (:mod:`.console_soak`) measures the whole console (uvicorn, the stream,
 polls, Chromium on the same two cores) and its pace swings with the machine. This replays
 the same detections (the three sample-site scenarios, ``--copies`` staggered copies each, the
 cameras at ``--rate-hz``, looping: what ``demtrack serve --replay`` makes) straight into a
-:class:`~demtrack.server.pipeline.Pipeline` over a fresh SQLite file, ``--coalesce`` replay
+:class:`~demtrack.server.ingest.pipeline.Pipeline` over a fresh SQLite file, ``--coalesce`` replay
 frames per batch, with the server's garbage-collector settings
-(:func:`demtrack.commands.serve.tune_gc_for_serving`), and no HTTP, stream or browser. It
+(:func:`demtrack.server.gc_tuning.tune_gc_for_serving`), and no HTTP, stream or browser. It
 prints, every ``--every`` s of scenario time, the CPU per detection, the share of it spent in
 the cyclic garbage collector and in the store's write transactions, and the objects the
 collector tracks; then the rate one core sustains against the rate 10x needs. The workload
@@ -82,10 +82,11 @@ class CpuMeter:
 
 def replay_in_process(args: argparse.Namespace, site_dir: Path, db: Path) -> list[dict[str, Any]]:
     """Replay into a pipeline; one row per ``args.every`` s of scenario time."""
-    from demtrack.commands.serve import tune_gc_for_serving
     from demtrack.core.site.folder import load_site
-    from demtrack.server.db import Store
-    from demtrack.server.pipeline import Pipeline, pipeline_options
+    from demtrack.samplesite.replay_source import SAMPLE_SCENARIOS
+    from demtrack.server.store.database import Store
+    from demtrack.server.gc_tuning import tune_gc_for_serving
+    from demtrack.server.ingest.pipeline import Pipeline, pipeline_options
     from demtrack.server.replay import scenario_stream
     from demtrack.server.settings import Settings
 
@@ -98,7 +99,13 @@ def replay_in_process(args: argparse.Namespace, site_dir: Path, db: Path) -> lis
     pipeline.start()
     frames = iter(
         scenario_stream(
-            site, list(SOAK_SCENARIOS), 0.0, loop=True, copies=args.copies, rate_hz=args.rate_hz
+            site,
+            list(SOAK_SCENARIOS),
+            0.0,
+            source=SAMPLE_SCENARIOS,
+            loop=True,
+            copies=args.copies,
+            rate_hz=args.rate_hz,
         )
     )
     gc.collect()

@@ -43,7 +43,8 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from demtrack.core.raycast.cast import RayCaster, warm_up
+from demtrack.core.raycast.cast import RayCaster
+from demtrack.core.warm import warm_raycast
 
 from .synthetic_terrain import SyntheticDem, camera_rays, incoherent_rays, synthetic_dem
 
@@ -426,7 +427,7 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"--threads at most {numba.config.NUMBA_NUM_THREADS} on this machine")
 
     numba.set_num_threads(args.threads)
-    warm_up()  # compile (or load) the kernels outside the timings
+    warm_raycast()  # compile (or load) the kernels outside the timings
     dem = synthetic_dem(args.size, args.cell, seed=args.seed)
     sets = {
         "camera": camera_rays(dem, args.rays, n_cameras=args.cameras, seed=args.seed + 1),

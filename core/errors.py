@@ -2,7 +2,8 @@
 
 Every error a user can cause derives from :class:`DemtrackError` and from the builtin
 that matches its nature, so callers may catch either. ``server/`` and the CLI map these
-to HTTP statuses and one-line messages in one place each.
+to HTTP statuses and one-line messages in one place each (``server/api/errors.py``:
+:class:`NotFoundError` is 404, every other :class:`DemtrackError` 422).
 """
 
 from __future__ import annotations
@@ -16,14 +17,25 @@ __all__ = [
     "DetectionError",
     "GeodesyError",
     "InputFileError",
+    "NotFoundError",
+    "QueryError",
     "RaycastError",
     "SiteError",
     "TrackingError",
+    "UnknownSensorError",
 ]
 
 
 class DemtrackError(Exception):
     """Root of every error raised on purpose by demtrack."""
+
+
+class NotFoundError(DemtrackError, LookupError):
+    """Something asked for by name or id that does not exist (a sensor, a track, ...)."""
+
+
+class QueryError(DemtrackError, ValueError):
+    """Query parameters that cannot be answered (a window ending before it starts, ...)."""
 
 
 class GeodesyError(DemtrackError, ValueError):
@@ -48,6 +60,10 @@ class CalibrationError(DemtrackError, ValueError):
 
 class SiteError(DemtrackError, ValueError):
     """A site folder that is missing, incomplete or inconsistent."""
+
+
+class UnknownSensorError(NotFoundError, SiteError):
+    """A sensor id the site does not have (a :class:`SiteError` as well, as it always was)."""
 
 
 class RaycastError(DemtrackError, ValueError):

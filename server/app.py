@@ -1,8 +1,12 @@
 """The FastAPI application factory and its lifespan.
 
-``create_app(settings)`` builds the settings (arguments, then ``DEMTRACK_*`` environment,
-then ``.env``), the routers and the error handlers; the site, the store, the tracker
-replay and the numba warm-up happen in the lifespan, when the server starts.
+``create_app(settings, scenarios=...)`` builds the settings (arguments, then
+``DEMTRACK_*`` environment, then ``.env``), the routers (:mod:`demtrack.server.api`, the
+stream :mod:`demtrack.server.stream`) and the error handlers
+(:mod:`demtrack.server.api.errors`); the site, the store, the tracker replay and the
+numba warm-up happen in the lifespan, when the server starts. The scenarios a live
+replay plays come from the caller (a
+:class:`~demtrack.server.scenario_source.ScenarioSource`): the server generates none.
 """
 
 from __future__ import annotations
@@ -16,27 +20,16 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Any
 
-import numpy as np
-from fastapi import Depends, FastAPI, Request
-from fastapi.encoders import jsonable_encoder
-from fastapi.exceptions import RequestValidationError
+from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
-from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
-from demtrack.core.camera.pinhole import undistort_normalized_nb
 from demtrack.core.errors import DemtrackError, SiteError
-from demtrack.core.raycast.cast import warm_up
 from demtrack.core.site.folder import Site, load_site
-from demtrack.core.terrain.surface import bilinear_sample
 from demtrack.core.tracking import METHODS
-from demtrack.core.tracking.warm import warm_up as warm_tracker
+from demtrack.core.warm import SERVER_ENGINES, warm_up
 
-from .db import Store
-from .hub import Hub
-from .pipeline import Pipeline, Publisher, pipeline_options
-from .replay import Replay, scenario_stream, start_time_after
-from .routers import (
+from .api import (
     detections,
     events,
     geolocate,
@@ -44,49 +37,45 @@ from .routers import (
     scene3d,
     sensors,
     site,
-    stream,
     synopsis,
     tracks,
     visibility,
     web,
 )
-from .security import require_reader, resolve_token
+from .api.deps import READER
+from .api.errors import install_error_handlers
+from .hub import Hub
+from .ingest.pipeline import Pipeline, Publisher, pipeline_options
+from .replay import Replay, scenario_stream, start_time_after
+from .scenario_source import ScenarioSource
+from .security import resolve_token
 from .settings import Settings
 from .state import ConsoleState
+from .store.database import Store
+from .stream import endpoint as stream
 
 __all__ = ["create_app"]
 
 log = logging.getLogger("demtrack.server")
 
 
-def _validation_detail(errors: list[dict[str, Any]]) -> tuple[str, list[dict[str, Any]]]:
-    """One readable line, and the errors without the offending input (NaN, or large)."""
-    clean, parts = [], []
-    for e in errors:
-        loc = [str(x) for x in e.get("loc", ())]
-        msg = str(e.get("msg", "invalid"))
-        clean.append({"loc": loc, "msg": msg, "type": str(e.get("type", ""))})
-        parts.append(f"{'.'.join(loc)}: {msg}" if loc else msg)
-    shown = "; ".join(parts[:5]) + (f" (and {len(parts) - 5} more)" if len(parts) > 5 else "")
-    return shown, jsonable_encoder(clean)
-
-
-async def _on_validation(request: Request, exc: RequestValidationError) -> JSONResponse:
-    detail, errors = _validation_detail(list(exc.errors()))
-    return JSONResponse({"detail": detail, "errors": errors}, status_code=422)
-
-
-async def _on_demtrack(request: Request, exc: Exception) -> JSONResponse:
-    code = 404 if isinstance(exc, SiteError) and "unknown" in str(exc) else 422
-    return JSONResponse({"detail": str(exc)}, status_code=code)
-
-
-def _check(settings: Settings) -> None:
+def _check(settings: Settings, scenarios: ScenarioSource | None) -> None:
     if settings.tracker_method not in METHODS:
         raise DemtrackError(
             f"unknown tracker method {settings.tracker_method!r}; known: {', '.join(METHODS)}"
         )
     if settings.replay:
+        if scenarios is None:
+            raise DemtrackError(
+                f"cannot replay {', '.join(settings.replay)}: no scenario source was handed to"
+                " create_app (demtrack serve and demtrack demo hand the sample site's)"
+            )
+        known = list(scenarios.names)
+        unknown = [name for name in settings.replay if name not in known]
+        if unknown:
+            raise DemtrackError(
+                f"unknown replay scenario {unknown[0]!r}; known: {', '.join(sorted(known))}"
+            )
         try:
             doc = json.loads((settings.site / "site.json").read_text("utf-8"))
         except (OSError, ValueError):
@@ -111,12 +100,8 @@ def _warm_kernels(done: threading.Event, after: Any = None) -> None:
     try:
         if after is not None:
             after()
-        warm_up(angular=False)  # requests cast small batches: the pyramid walk only
-        undistort_normalized_nb(np.array([0.1]), np.array([0.1]), -0.04, 0.0, 0.0, 0.0, 0.0)
-        grid = np.zeros((2, 2), np.float32)
-        grid.setflags(write=False)  # as a Dem's rasters
-        bilinear_sample(grid, np.array([0.5]), np.array([0.5]))  # the terrain surface
-        warm_tracker()  # the live tracker's fusion and Kalman kernels
+        # Ray casts (small batches: the pyramid walk only), lens, surface, live tracker.
+        warm_up(SERVER_ENGINES, angular=False)
         log.info("ray-casting kernels ready in %.1f s", time.perf_counter() - t0)
     except Exception:  # noqa: BLE001 - a failed warm-up only costs the first request time
         log.exception("kernel warm-up failed")
@@ -143,9 +128,16 @@ def _start_scene(site_: Site, settings: Settings) -> Any:
 
 
 def _start_replay(
-    site_: Site, store: Store, pipeline: Pipeline, settings: Settings, after: Any = None
+    site_: Site,
+    store: Store,
+    pipeline: Pipeline,
+    settings: Settings,
+    scenarios: ScenarioSource,
+    after: Any = None,
 ) -> Replay:
     """Start replaying ``settings.replay``; ``after`` (optional) is called before it plays.
+
+    ``scenarios`` (``app.state.scenarios``, from :func:`create_app`) makes them.
 
     ``after`` (``app.state.replay_after``) runs in the replay thread once the scenarios are
     generated: ``demtrack demo`` sets it to wait for a child process compiling the
@@ -159,6 +151,7 @@ def _start_replay(
             site_,
             names,
             t0,
+            source=scenarios,
             loop=settings.replay_loop,
             copies=settings.replay_copies,
             rate_hz=settings.replay_rate_hz,
@@ -210,7 +203,14 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     log.info("replayed %(replayed)d fixes, processed %(processed)d detections", counts)
     app.state.console = ConsoleState(settings, site_, store, hub, pipeline, caster)
     app.state.replay = (
-        _start_replay(site_, store, pipeline, settings, getattr(app.state, "replay_after", None))
+        _start_replay(
+            site_,
+            store,
+            pipeline,
+            settings,
+            app.state.scenarios,
+            getattr(app.state, "replay_after", None),
+        )
         if settings.replay
         else None
     )
@@ -225,7 +225,12 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
         store.close()
 
 
-def create_app(settings: Settings | None = None, **overrides: Any) -> FastAPI:
+def create_app(
+    settings: Settings | None = None,
+    *,
+    scenarios: ScenarioSource | None = None,
+    **overrides: Any,
+) -> FastAPI:
     """Build the console's FastAPI app.
 
     Parameters
@@ -233,11 +238,15 @@ def create_app(settings: Settings | None = None, **overrides: Any) -> FastAPI:
     settings : Settings, optional
         Complete settings; when None they are read from ``overrides`` (keyword arguments
         named as the :class:`Settings` fields), the ``DEMTRACK_*`` environment and ``.env``.
+    scenarios : ScenarioSource, optional
+        Makes the scenarios ``settings.replay`` names (needed only for a replay):
+        ``demtrack.samplesite.replay_source.SAMPLE_SCENARIOS`` for the sample site.
 
     Raises
     ------
     DemtrackError
-        On settings that cannot work (missing site folder, unknown tracker method).
+        On settings that cannot work (missing site folder, unknown tracker method, a
+        replay without a scenario source or of a scenario it does not know).
 
     Notes
     -----
@@ -246,7 +255,7 @@ def create_app(settings: Settings | None = None, **overrides: Any) -> FastAPI:
     ``app.state.token_generated`` tell the caller what to print.
     """
     settings = settings if settings is not None else Settings(**overrides)
-    _check(settings)
+    _check(settings, scenarios)
     if not (settings.site / "site.json").is_file():
         raise SiteError(f"not a site folder (no site.json): {settings.site}")
     app = FastAPI(
@@ -257,6 +266,7 @@ def create_app(settings: Settings | None = None, **overrides: Any) -> FastAPI:
         max_body_size=settings.max_body_bytes,
     )
     app.state.settings = settings
+    app.state.scenarios = scenarios
     app.state.token, app.state.token_file, app.state.token_generated = resolve_token(settings)
     if settings.cors_origins:
         app.add_middleware(
@@ -265,18 +275,16 @@ def create_app(settings: Settings | None = None, **overrides: Any) -> FastAPI:
             allow_methods=["GET", "POST"],
             allow_headers=["Authorization", "Content-Type", "X-Demtrack-Token"],
         )
-    app.add_exception_handler(RequestValidationError, _on_validation)  # type: ignore[arg-type]
-    app.add_exception_handler(DemtrackError, _on_demtrack)
-    reader = [Depends(require_reader)]
+    install_error_handlers(app)
     app.include_router(health.router)
-    app.include_router(site.router, dependencies=reader)
-    app.include_router(sensors.router, dependencies=reader)
-    app.include_router(geolocate.router, dependencies=reader)
+    app.include_router(site.router, dependencies=READER)
+    app.include_router(sensors.router, dependencies=READER)
+    app.include_router(geolocate.router, dependencies=READER)
     app.include_router(detections.router)
-    app.include_router(tracks.router, dependencies=reader)
-    app.include_router(synopsis.router, dependencies=reader)
-    app.include_router(events.router, dependencies=reader)
-    app.include_router(visibility.router, dependencies=reader)
+    app.include_router(tracks.router, dependencies=READER)
+    app.include_router(synopsis.router, dependencies=READER)
+    app.include_router(events.router, dependencies=READER)
+    app.include_router(visibility.router, dependencies=READER)
     app.include_router(scene3d.router)
     app.include_router(stream.router)
     app.include_router(web.router)

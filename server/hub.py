@@ -17,8 +17,8 @@ import asyncio
 from dataclasses import dataclass, field
 from typing import Any
 
-from .db import dumps_json
 from .messages import BATCH_MAX_MESSAGES as _BATCH_MAX
+from .store.codec import dumps_json
 
 __all__ = [
     "BATCH_MAX_CHARS",
@@ -45,7 +45,7 @@ _BATCH_HEAD = '{"type":"batch","seq":null,"messages":['
 class StreamMessage(dict):  # type: ignore[type-arg]
     """A published message: the payload with its ``seq`` (last), carrying its JSON text.
 
-    The pipeline makes these from what the store wrote (:func:`~demtrack.server.db.
+    The pipeline makes these from what the store wrote (:func:`~demtrack.server.store.codec.
     published_text`), so the hub queues ``text`` without encoding the message again;
     subscribers that read the dict (the 3D scene) see an ordinary message.
     """

@@ -13,7 +13,7 @@ the model's (pydantic would have rejected extra keys of ``extra="forbid"`` model
 filled defaults), aliases applied (``"class"``, not ``cls``), and every value JSON-able.
 The tests compare each such route with ``Model.model_validate(...)`` of the same data.
 
-The body is encoded as every stored body is (:func:`~demtrack.server.db.encode_json`,
+The body is encoded as every stored body is (:func:`~demtrack.server.store.codec.encode_json`,
 msgspec): the JSON pydantic's ``dump_json`` writes for the same values, except that
 integers stay integers where a model would have made them floats (``5`` rather than
 ``5.0``: the same JSON number) and NaN or infinities become ``null`` (the server's numbers
@@ -26,7 +26,7 @@ from typing import Any
 
 from starlette.responses import Response
 
-from .db import encode_json
+from .store.codec import encode_json
 
 __all__ = ["json_response"]
 

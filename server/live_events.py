@@ -32,26 +32,18 @@ from typing import Any
 
 import numpy as np
 
-from demtrack.core.activity.detectors import (
-    ActivityEvent,
-    ConvoyParams,
-    LoiterParams,
-    RendezvousParams,
-    Zone,
-    detect_convoys,
-    detect_loitering,
-    detect_rendezvous,
-    detect_zone_crossings,
-)
+from demtrack.core.activity.convoy import ConvoyParams, detect_convoys
+from demtrack.core.activity.detectors import ActivityEvent
+from demtrack.core.activity.kinds import INTERVAL_KINDS, EventKind
+from demtrack.core.activity.loitering import LoiterParams, detect_loitering
+from demtrack.core.activity.rendezvous import RendezvousParams, detect_rendezvous
+from demtrack.core.activity.zones import Zone, detect_zone_crossings
 from demtrack.core.site.folder import Site
 from demtrack.core.tracking.types import Track
 from demtrack.core.visibility.handoff import HandoffTarget, predict_handoffs
 from demtrack.core.visibility.target_heights import target_height_for
 
-__all__ = ["INTERVAL_KINDS", "LiveEventParams", "LiveEvents", "Window"]
-
-#: Kinds that last a while (deduplicated as episodes).
-INTERVAL_KINDS = ("loitering", "rendezvous", "convoy")
+__all__ = ["LiveEventParams", "LiveEvents", "Window"]
 
 
 @dataclass(frozen=True)
@@ -137,7 +129,7 @@ class LiveEvents:
         self._closed: dict[str, float] = {}
         self._handoff: dict[int, tuple[str | None, str | None]] = {}
         for body in known:
-            if body["kind"] == "handoff":
+            if body["kind"] == EventKind.HANDOFF:
                 d = body["details"]
                 self._handoff[body["track_ids"][0]] = (d.get("current"), d.get("next_sensor"))
             elif body.get("open"):
@@ -327,9 +319,14 @@ class LiveEvents:
                 "speed_mps": float(np.hypot(v[0], v[1])),
             }
             e = ActivityEvent(
-                "handoff", float(t[-1]), details["exit_t_s"], (tr.id,), where, details
+                EventKind.HANDOFF.value,
+                float(t[-1]),
+                details["exit_t_s"],
+                (tr.id,),
+                where,
+                details,
             )
-            ident = f"handoff:{tr.id}:{pred.current}>{pred.next_sensor}"
+            ident = f"{EventKind.HANDOFF}:{tr.id}:{pred.current}>{pred.next_sensor}"
             body = self._body(e, {}, ident)
             body["sensors"] = [s for s in pair if s is not None]
             out.append(self._geo(body))

@@ -1,16 +1,17 @@
-"""Live replay: a sample-site scenario fed into the ingest path as camera processes would.
+"""Live replay: scenarios fed into the ingest path as camera processes would.
 
-A scenario (:mod:`demtrack.samplesite.scenarios`) is a time-ordered list of detections
-from the three genlocked cameras. The replay groups them into one batch per camera per
-frame - what a camera process posts to ``POST /api/detections`` - and hands each batch to
-:meth:`demtrack.server.pipeline.Pipeline.ingest`, the call that route makes, paced by the
-wall clock at ``speed`` times real time. Going through the pipeline rather than HTTP keeps
-the same validation, durable commit, geolocation, tracking and publication, without
-loopback HTTP and JSON costs on a small machine and without needing the port (which is
-only known once uvicorn is up when it binds port 0). When ingest cannot keep up (a busy
-two-core machine, or a high speed), the frames already due are sent together as one
-batch in time order - as a buffering camera gateway would - so the replay holds its
-clock instead of drifting behind it.
+A scenario (made by the :class:`~demtrack.server.scenario_source.ScenarioSource` the
+caller hands over: the sample site's in ``demtrack serve`` and ``demtrack demo``) is a
+time-ordered list of detections from genlocked cameras. The replay groups them into one
+batch per camera per frame - what a camera process posts to ``POST /api/detections`` -
+and hands each batch to :meth:`demtrack.server.pipeline.Pipeline.ingest`, the call that
+route makes, paced by the wall clock at ``speed`` times real time. Going through the
+pipeline rather than HTTP keeps the same validation, durable commit, geolocation,
+tracking and publication, without loopback HTTP and JSON costs on a small machine and
+without needing the port (which is only known once uvicorn is up when it binds port 0).
+When ingest cannot keep up (a busy two-core machine, or a high speed), the frames already
+due are sent together as one batch in time order - as a buffering camera gateway would -
+so the replay holds its clock instead of drifting behind it.
 
 Several scenarios play at once, each looping on its own period (its span plus a gap) so
 the console always has something moving. Times are shifted so they start after the
@@ -29,13 +30,14 @@ import math
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 from demtrack.core.site.folder import Site
 from demtrack.core.tracking.types import Detection
 
 from .replay_schedule import replay_schedule
+from .scenario_source import ReplayScenario, ScenarioSource
 
 __all__ = [
     "Replay",
@@ -96,7 +98,8 @@ def scenario_frames(detections: Sequence[Detection]) -> list[ReplayFrame]:
     Parameters
     ----------
     detections : sequence of Detection
-        In time order (as :func:`~demtrack.samplesite.scenarios.make_scenario` makes them).
+        In time order (as a :class:`~demtrack.server.scenario_source.ScenarioSource` makes
+        them).
 
     Returns
     -------
@@ -171,21 +174,24 @@ def start_time_after(last_times: dict[str, float], gap_s: float = LOOP_GAP_S) ->
 
 
 def scenario_copies(
-    site: Site, names: Sequence[str], copies: int, rate_hz: float | None = None
-) -> tuple[list[tuple[str, list[Any]]], float]:
+    site: Site,
+    names: Sequence[str],
+    copies: int,
+    rate_hz: float | None = None,
+    *,
+    source: ScenarioSource,
+) -> tuple[list[tuple[str, list[ReplayScenario]]], float]:
     """Each named scenario's copies (copy ``k`` with noise seed ``k``) and the frame rate.
 
-    ``rate_hz``: the cameras' frame rate (default: the scenarios' own).
+    ``rate_hz``: the cameras' frame rate (default: the scenarios' own, ``source.rate_hz``);
+    ``source`` makes the scenarios.
     """
-    from demtrack.samplesite.scenarios import ScenarioParams, make_scenario
-
     made = []
-    params = ScenarioParams() if rate_hz is None else ScenarioParams(rate_hz=rate_hz)
     for name in names:
         made.append(
-            (name, [make_scenario(site, name, replace(params, seed=k)) for k in range(copies)])
+            (name, [source.make(site, name, seed=k, rate_hz=rate_hz) for k in range(copies)])
         )
-    return made, params.rate_hz
+    return made, source.rate_hz if rate_hz is None else rate_hz
 
 
 def scenario_stream(
@@ -193,19 +199,22 @@ def scenario_stream(
     names: Sequence[str],
     t0_s: float,
     *,
+    source: ScenarioSource,
     loop: bool = True,
     gap_s: float = LOOP_GAP_S,
     copies: int = 1,
     rate_hz: float | None = None,
     duration_s: float | None = None,
 ) -> Iterator[ReplayFrame]:
-    """Frames of the named sample-site scenarios played together from ``t0_s``.
+    """Frames of the named scenarios played together from ``t0_s``.
 
-    Each scenario is generated (:func:`~demtrack.samplesite.scenarios.make_scenario`,
-    default noise; about a second each) and loops on its own period.
+    Each scenario is generated by ``source`` (the sample site's: default noise, about a
+    second each) and loops on its own period.
 
     Parameters
     ----------
+    source : ScenarioSource
+        Makes the scenarios (``demtrack.samplesite.replay_source.SAMPLE_SCENARIOS``).
     copies : int
         Copies of each scenario, copy ``k`` made with noise seed ``k`` and started
         ``k / copies`` of the scenario's period after copy 0, rounded to a whole frame so
@@ -221,14 +230,15 @@ def scenario_stream(
     Raises
     ------
     SiteError
-        An unknown scenario, or a site that is not a generated sample site.
+        From the sample site's source: an unknown scenario, or a site that is not a
+        generated sample site.
     ValueError
         ``copies`` below 1.
     """
     if copies < 1:
         raise ValueError(f"replay copies must be at least 1, got {copies}")
     played = []  # per scenario: each copy's frames, copy 0's truths
-    made, rate = scenario_copies(site, names, copies, rate_hz)
+    made, rate = scenario_copies(site, names, copies, rate_hz, source=source)
     for _, scenarios in made:
         frames = [scenario_frames(sc.detections) for sc in scenarios]
         if frames[0]:

@@ -1,22 +1,23 @@
-"""The running server's state and its dependency alias."""
+"""The running server's state: what the routers and services share, built in the lifespan.
+
+The routers reach it through :data:`demtrack.server.api.deps.StateDep`.
+"""
 
 from __future__ import annotations
 
 import threading
 from dataclasses import dataclass, field
-from typing import Annotated, Any
-
-from fastapi import Depends, Request
+from typing import Any
 
 from demtrack.core.raycast.cast import RayCaster
 from demtrack.core.site.folder import Site
 
-from .db import Store
 from .hub import Hub
-from .pipeline import Pipeline
+from .ingest.pipeline import Pipeline
 from .settings import Settings
+from .store.database import Store
 
-__all__ = ["ConsoleState", "StateDep", "get_state"]
+__all__ = ["ConsoleState"]
 
 
 @dataclass(eq=False)
@@ -38,11 +39,3 @@ class ConsoleState:
             if key not in self.cache:
                 self.cache[key] = make()
             return self.cache[key]
-
-
-def get_state(request: Request) -> ConsoleState:
-    """The app's :class:`ConsoleState`."""
-    return request.app.state.console
-
-
-StateDep = Annotated[ConsoleState, Depends(get_state)]

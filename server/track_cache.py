@@ -28,7 +28,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from .db import Store, TrackTail, loads_json
+from .store.codec import loads_json
+from .store.database import Store
+from .store.queries import TrackTail
 
 __all__ = ["DEFAULT_MAX_BYTES", "CachedTrack", "TrackCache", "clip"]
 

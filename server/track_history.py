@@ -3,7 +3,8 @@
 A live track is rewritten many times a second, but each write replaces only its points
 from one index on (``points_from``: new points and the smoother's revised tail).
 :class:`PointCuts` remembers, for the recent writes of each track made through one
-:class:`~demtrack.server.db.Store`, the version before, the version after and that index.
+:class:`~demtrack.server.store.database.Store`, the version before, the version after and
+that index.
 A reader holding version ``R`` of a track whose stored version is now ``N`` then needs only
 the points from the smallest index written along the chain of writes ``R -> ... -> N``;
 the ones before it are those it holds. When the chain is not complete (writes by another

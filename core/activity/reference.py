@@ -16,18 +16,10 @@ from typing import Any
 import numpy as np
 import shapely
 
-from .detectors import (
-    ActivityEvent,
-    ConvoyParams,
-    LoiterParams,
-    RendezvousParams,
-    Trajectory,
-    _ids,
-    _resample,
-    _runs,
-    _speed,
-    _step_s,
-)
+from .convoy import ConvoyParams, _step_s
+from .detectors import ActivityEvent, Trajectory, _ids, _resample, _runs, _speed
+from .loitering import LoiterParams
+from .rendezvous import RendezvousParams
 
 __all__ = [
     "detect_convoys_reference",

@@ -10,24 +10,12 @@ Conventions (``docs/conventions.md``):
   ``v in [-0.5, height - 0.5]``. OpenCV calibrations use the same convention, so their
   ``cx, cy`` are taken as they are.
 * Lens model: OpenCV's radial (``k1, k2, k3``) and tangential (``p1, p2``) distortion of
-  the ideal normalised coordinates ``(xn, yn) = (x/z, y/z)``::
+  the ideal normalised coordinates, inverted by damped Newton iteration: stated in full
+  in ``core.camera.lens``. :class:`Intrinsics` refuses coefficients whose radial model
+  folds back inside the image.
 
-      r2 = xn^2 + yn^2,   g = 1 + k1 r2 + k2 r2^2 + k3 r2^3
-      xd = xn g + 2 p1 xn yn + p2 (r2 + 2 xn^2)
-      yd = yn g + p1 (r2 + 2 yn^2) + 2 p2 xn yn
-      u = fx xd + cx,     v = fy yd + cy
-
-Undistortion inverts this map by damped Newton iteration on its 2x2 Jacobian (OpenCV's
-plain fixed-point loop stalls or diverges at the corners of strongly distorted lenses).
-A polynomial radial model folds back on itself beyond the radius where
-``d(r g)/dr = 0``; :class:`Intrinsics` refuses coefficients that fold inside the image, and
-the projection kernels return NaN for rays beyond the fold, which a folded model would
-otherwise map back *into* the image.
-
-The module-level functions are permissive array kernels (no input checks, NaN where there
-is no answer); the classes validate. Undistortion has a numba kernel
-(:func:`undistort_normalized_nb`, used by :meth:`Intrinsics.undistort`) and a plain-numpy
-twin (:func:`undistort_normalized`, used by the construction check and the tests).
+The lens model's array functions live in ``core.camera.lens`` (its numba kernel in
+``core.camera._lens_kernels``); the classes here validate.
 """
 
 from __future__ import annotations
@@ -36,23 +24,24 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
 from ..errors import CameraError
+from .lens import (
+    distort_normalized,
+    distortion_jacobian,
+    radial_fold_radius,
+    undistort_normalized,
+    undistort_normalized_nb,
+)
 
 __all__ = [
     "CAMERA_FORMAT",
     "CAMERA_FORMAT_VERSION",
     "Camera",
     "Intrinsics",
-    "distort_normalized",
-    "distortion_jacobian",
-    "radial_fold_radius",
     "rotation_from_azimuth_tilt_roll",
-    "undistort_normalized",
-    "undistort_normalized_nb",
 ]
 
 #: ``format`` tag and version of :meth:`Camera.to_dict` documents.
@@ -60,300 +49,6 @@ CAMERA_FORMAT = "demtrack.camera"
 CAMERA_FORMAT_VERSION = 1
 
 _INTRINSIC_KEYS = ("fx", "fy", "cx", "cy", "width", "height", "k1", "k2", "p1", "p2", "k3")
-_MAX_NEWTON_ITER = 60
-# Normalised radius (tan of the off-axis angle) beyond which folds are not looked for:
-# 1e4 is 89.994 degrees off the optical axis.
-_R_FOLD_MAX = 1e4
-_MAX_HALVINGS = 40
-
-
-# ---------------------------------------------------------------------------------------
-# Array kernels (no validation)
-# ---------------------------------------------------------------------------------------
-
-
-def distort_normalized(
-    xn: np.ndarray, yn: np.ndarray, k1: float, k2: float, p1: float, p2: float, k3: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Apply OpenCV distortion to ideal normalised coordinates.
-
-    Parameters
-    ----------
-    xn, yn : ndarray
-        Ideal (undistorted) normalised image coordinates ``x/z, y/z`` (camera frame).
-    k1, k2, p1, p2, k3 : float
-        OpenCV distortion coefficients.
-
-    Returns
-    -------
-    xd, yd : ndarray
-        Distorted normalised coordinates, same shape as the broadcast inputs.
-    """
-    r2 = xn * xn + yn * yn
-    g = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    xy = xn * yn
-    xd = xn * g + 2.0 * p1 * xy + p2 * (r2 + 2.0 * xn * xn)
-    yd = yn * g + p1 * (r2 + 2.0 * yn * yn) + 2.0 * p2 * xy
-    return xd, yd
-
-
-def distortion_jacobian(
-    xn: np.ndarray, yn: np.ndarray, k1: float, k2: float, p1: float, p2: float, k3: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Jacobian of :func:`distort_normalized`.
-
-    Returns
-    -------
-    dxd_dx, dxd_dy, dyd_dx, dyd_dy : ndarray
-        Partial derivatives (the two off-diagonal terms are equal for this model).
-    """
-    r2 = xn * xn + yn * yn
-    g = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    dg = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)  # dg / d(r2)
-    off = 2.0 * xn * yn * dg + 2.0 * p1 * xn + 2.0 * p2 * yn
-    a = g + 2.0 * xn * xn * dg + 2.0 * p1 * yn + 6.0 * p2 * xn
-    d = g + 2.0 * yn * yn * dg + 6.0 * p1 * yn + 2.0 * p2 * xn
-    return a, off, off, d
-
-
-def radial_fold_radius(k1: float, k2: float, k3: float) -> float:
-    """Smallest undistorted radius where the radial map ``r * g(r^2)`` stops increasing.
-
-    Parameters
-    ----------
-    k1, k2, k3 : float
-        Radial coefficients.
-
-    Returns
-    -------
-    float
-        The first positive root of ``d(r g)/dr = 1 + 3 k1 r^2 + 5 k2 r^4 + 7 k3 r^6``
-        (normalised units), or ``inf`` if the map is monotonic for all ``r >= 0``.
-    """
-    # Coefficients in s = r^2, highest power first. Leading terms that stay below 1e-12
-    # for every r <= _R_FOLD_MAX cannot fold the model where it matters; dropping them
-    # also keeps the companion matrix finite (a denormal k3 would overflow it).
-    poly = [7.0 * k3, 5.0 * k2, 3.0 * k1, 1.0]
-    while len(poly) > 1 and abs(poly[0]) * _R_FOLD_MAX ** (2 * (len(poly) - 1)) < 1e-12:
-        poly.pop(0)
-    if len(poly) <= 1:
-        return math.inf
-    roots = np.roots(poly)
-    # A double root (the derivative just touching zero) may come back as a complex pair
-    # with a round-off imaginary part; count it as a fold, conservatively.
-    tol = 1e-7 * np.maximum(1.0, np.abs(roots))
-    s = roots.real[(np.abs(roots.imag) <= tol) & (roots.real > 0.0)]
-    return float(math.sqrt(s.min())) if s.size else math.inf
-
-
-def undistort_normalized(
-    xd: ArrayLike,
-    yd: ArrayLike,
-    k1: float,
-    k2: float,
-    p1: float,
-    p2: float,
-    k3: float,
-    r_max: float = math.inf,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Invert :func:`distort_normalized` by damped Newton iteration.
-
-    Each step solves the 2x2 Jacobian system; a step is halved while it would leave the
-    disc ``r < r_max`` (the radial fold) or increase the residual, which keeps the
-    iteration on the invertible branch even from a poor start.
-
-    Parameters
-    ----------
-    xd, yd : array_like
-        Distorted normalised coordinates (broadcast together).
-    k1, k2, p1, p2, k3 : float
-        OpenCV distortion coefficients.
-    r_max : float
-        Undistorted radius the solution must stay within (see :func:`radial_fold_radius`).
-
-    Returns
-    -------
-    xn, yn : ndarray, float64
-        Ideal normalised coordinates, broadcast shape; NaN where the input is not finite
-        or has no preimage inside ``r_max`` (the iteration did not converge).
-    """
-    xd, yd = np.broadcast_arrays(np.asarray(xd, dtype=np.float64), np.asarray(yd, dtype=np.float64))
-    shape = xd.shape
-    xd = xd.ravel().copy()
-    yd = yd.ravel().copy()
-    if k1 == 0.0 and k2 == 0.0 and k3 == 0.0 and p1 == 0.0 and p2 == 0.0:
-        return xd.reshape(shape), yd.reshape(shape)
-    coeffs = (k1, k2, p1, p2, k3)
-    r2_max = r_max * r_max
-    x = xd.copy()
-    y = yd.copy()
-    # Start inside the fold so that the first Jacobian is on the right branch.
-    r2 = x * x + y * y
-    over = r2 > 0.81 * r2_max
-    if over.any():
-        scale = 0.9 * r_max / np.sqrt(r2[over])
-        x[over] *= scale
-        y[over] *= scale
-    ok = np.isfinite(xd) & np.isfinite(yd)
-    active = np.flatnonzero(ok)
-    for _ in range(_MAX_NEWTON_ITER):
-        if active.size == 0:
-            break
-        xa, ya, ta, tb = x[active], y[active], xd[active], yd[active]
-        fx, fy = distort_normalized(xa, ya, *coeffs)
-        ex, ey = fx - ta, fy - tb
-        e0 = ex * ex + ey * ey
-        # Already at round-off level: another step could only shuffle the last bits.
-        conv = e0 <= (1e-15 * (1.0 + np.hypot(ta, tb))) ** 2
-        if conv.any():
-            keep = ~conv
-            active = active[keep]
-            xa, ya, ta, tb, ex, ey, e0 = (w[keep] for w in (xa, ya, ta, tb, ex, ey, e0))
-            if active.size == 0:
-                break
-        a, b, c, d = distortion_jacobian(xa, ya, *coeffs)
-        det = a * d - b * c
-        with np.errstate(divide="ignore", invalid="ignore"):
-            dx = (d * ex - b * ey) / det
-            dy = (a * ey - c * ex) / det
-        step = np.ones_like(xa)
-        xn, yn = xa - dx, ya - dy
-        for _ in range(_MAX_HALVINGS):
-            fx2, fy2 = distort_normalized(xn, yn, *coeffs)
-            e1 = (fx2 - ta) ** 2 + (fy2 - tb) ** 2
-            bad = ~((xn * xn + yn * yn < r2_max) & (e1 <= e0))
-            if not bad.any():
-                break
-            step = np.where(bad, 0.5 * step, step)
-            xn = np.where(bad, xa - step * dx, xn)
-            yn = np.where(bad, ya - step * dy, yn)
-        moved = np.hypot(xn - xa, yn - ya)
-        accept = np.isfinite(xn) & np.isfinite(yn) & ~bad
-        x[active] = np.where(accept, xn, xa)
-        y[active] = np.where(accept, yn, ya)
-        # A point is done once Newton's correction is at round-off level, or when no
-        # descent step exists any more (it then either sits on the root or has none).
-        done = ~accept | (moved <= 4e-16 * (1.0 + np.hypot(xa, ya)))
-        active = active[~done]
-    fx, fy = distort_normalized(x, y, *coeffs)
-    resid = np.hypot(fx - xd, fy - yd)
-    good = ok & (resid <= 1e-12 * (1.0 + np.hypot(xd, yd))) & (x * x + y * y < r2_max)
-    x[~good] = np.nan
-    y[~good] = np.nan
-    return x.reshape(shape), y.reshape(shape)
-
-
-@numba.njit(cache=True, nogil=True)
-def _undistort_kernel(
-    xd: np.ndarray,
-    yd: np.ndarray,
-    k1: float,
-    k2: float,
-    p1: float,
-    p2: float,
-    k3: float,
-    r2_max: float,
-    out_x: np.ndarray,
-    out_y: np.ndarray,
-) -> None:  # pragma: no cover - compiled
-    # Point-by-point twin of undistort_normalized (same steps, same tolerances).
-    for i in range(xd.size):
-        tx, ty = xd[i], yd[i]
-        out_x[i] = np.nan
-        out_y[i] = np.nan
-        if not (math.isfinite(tx) and math.isfinite(ty)):
-            continue
-        x, y = tx, ty
-        r2 = x * x + y * y
-        if r2 > 0.81 * r2_max:
-            scale = 0.9 * math.sqrt(r2_max / r2)
-            x *= scale
-            y *= scale
-        tol_e = 1e-15 * (1.0 + math.sqrt(tx * tx + ty * ty))
-        for _ in range(_MAX_NEWTON_ITER):
-            r2 = x * x + y * y
-            g = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            ex = x * g + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - tx
-            ey = y * g + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - ty
-            e0 = ex * ex + ey * ey
-            if e0 <= tol_e * tol_e:
-                break
-            dg = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
-            off = 2.0 * x * y * dg + 2.0 * p1 * x + 2.0 * p2 * y
-            a = g + 2.0 * x * x * dg + 2.0 * p1 * y + 6.0 * p2 * x
-            d = g + 2.0 * y * y * dg + 6.0 * p1 * y + 2.0 * p2 * x
-            det = a * d - off * off
-            if det == 0.0:
-                break
-            dx = (d * ex - off * ey) / det
-            dy = (a * ey - off * ex) / det
-            step = 1.0
-            accepted = False
-            xn, yn = x, y
-            for _h in range(_MAX_HALVINGS):
-                xn = x - step * dx
-                yn = y - step * dy
-                r2n = xn * xn + yn * yn
-                gn = 1.0 + r2n * (k1 + r2n * (k2 + r2n * k3))
-                fx = xn * gn + 2.0 * p1 * xn * yn + p2 * (r2n + 2.0 * xn * xn) - tx
-                fy = yn * gn + p1 * (r2n + 2.0 * yn * yn) + 2.0 * p2 * xn * yn - ty
-                if r2n < r2_max and fx * fx + fy * fy <= e0:
-                    accepted = True
-                    break
-                step *= 0.5
-            if not accepted:
-                break
-            moved = math.sqrt((xn - x) ** 2 + (yn - y) ** 2)
-            done = moved <= 4e-16 * (1.0 + math.sqrt(x * x + y * y))
-            x, y = xn, yn
-            if done:
-                break
-        r2 = x * x + y * y
-        g = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        ex = x * g + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - tx
-        ey = y * g + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - ty
-        tol_r = 1e-12 * (1.0 + math.sqrt(tx * tx + ty * ty))
-        if math.sqrt(ex * ex + ey * ey) <= tol_r and r2 < r2_max:
-            out_x[i] = x
-            out_y[i] = y
-
-
-def undistort_normalized_nb(
-    xd: ArrayLike,
-    yd: ArrayLike,
-    k1: float,
-    k2: float,
-    p1: float,
-    p2: float,
-    k3: float,
-    r_max: float = math.inf,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Compiled twin of :func:`undistort_normalized` (same arguments and results).
-
-    Used by :meth:`Intrinsics.undistort`: about twenty times faster on full-frame pixel
-    grids. Compiled (and cached on disk) at first call.
-    """
-    xd, yd = np.broadcast_arrays(np.asarray(xd, dtype=np.float64), np.asarray(yd, dtype=np.float64))
-    shape = xd.shape
-    xd = np.ascontiguousarray(xd.ravel())
-    yd = np.ascontiguousarray(yd.ravel())
-    if k1 == 0.0 and k2 == 0.0 and k3 == 0.0 and p1 == 0.0 and p2 == 0.0:
-        return xd.copy().reshape(shape), yd.copy().reshape(shape)
-    out_x = np.empty_like(xd)
-    out_y = np.empty_like(yd)
-    _undistort_kernel(
-        xd,
-        yd,
-        float(k1),
-        float(k2),
-        float(p1),
-        float(p2),
-        float(k3),
-        float(r_max) ** 2,
-        out_x,
-        out_y,
-    )
-    return out_x.reshape(shape), out_y.reshape(shape)
 
 
 def rotation_from_azimuth_tilt_roll(

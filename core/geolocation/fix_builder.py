@@ -219,11 +219,26 @@ def build_fixes(
     origin_enu = batch.origins_enu + shift
     road_enu = batch.road_enu + shift
     has_road = batch.has_road
-    arrays = (batch.offsets, origin_enu, d, hits_enu, sigma, road_enu, has_road, cov)
-    made = _trusted_fixes(detections, order, *arrays)
-    if made is None:  # something is off: the validating constructor names it
-        made = _checked_fixes(detections, order, *arrays)
-    fixes = [made[i] for i in sorted(made)]
+    # Only rays that met the terrain give a fix (their hits are contiguous already).
+    keep = np.flatnonzero(n_hits > 0)
+    kept = [order[r] for r in keep.tolist()]
+    dets = [detections[i] for i in kept]
+    fixes = Fix.from_arrays(
+        [det.t_s for det in dets],
+        [det.sensor for det in dets],
+        [det.cls for det in dets],
+        kept,
+        origin_enu[keep],
+        d[keep],
+        np.concatenate(([0], np.cumsum(n_hits[keep]))),
+        hits_enu,
+        sigma,
+        road_hit_enu=road_enu[keep],
+        has_road=has_road[keep],
+        score=[det.score for det in dets],
+        hit_cov_en_m2=cov,
+    )
+    fixes.sort(key=lambda f: f.detection_index)
     return fixes, FixReport(len(detections), len(fixes), counts, n_multi)
 
 
@@ -280,101 +295,3 @@ def _centre_shift(
         a[:, :, None] * a[:, None, :]
     )
     return shift, cov
-
-
-def _trusted_fixes(
-    detections: Sequence[Detection],
-    order: Sequence[int],
-    offsets: np.ndarray,
-    origin_enu: np.ndarray,
-    d: np.ndarray,
-    hits_enu: np.ndarray,
-    sigma: np.ndarray,
-    road_enu: np.ndarray,
-    has_road: np.ndarray,
-    cov: np.ndarray,
-) -> dict[int, Fix] | None:
-    """Fixes by ``Fix._trusted`` after checking whole arrays at once (None: a check fails).
-
-    Gives exactly what :class:`Fix`'s validating constructor gives (same arithmetic,
-    element by element), without its per-fix copies and checks. Arrays: rays (n, 3),
-    hits (k, 3), sigma (k,), covariances (k, 2, 2); ``offsets`` (n + 1,) splits hits by ray.
-    """
-    used = np.diff(offsets) > 0
-    origin_enu = np.asarray(origin_enu, dtype=np.float64)
-    d = np.asarray(d, dtype=np.float64)
-    hits_enu = np.asarray(hits_enu, dtype=np.float64)
-    sigma = np.asarray(sigma, dtype=np.float64)
-    road_enu = np.asarray(road_enu, dtype=np.float64)
-    cov = np.asarray(cov, dtype=np.float64)
-    checked = (origin_enu[used], d[used], hits_enu, sigma, road_enu[used & has_road], cov)
-    if not all(np.isfinite(a).all() for a in checked) or np.any(sigma <= 0):
-        return None
-    sym = 0.5 * (cov + np.swapaxes(cov, 1, 2))
-    det = sym[:, 0, 0] * sym[:, 1, 1] - sym[:, 0, 1] ** 2
-    if np.any(sym[:, 0, 0] <= 0) or np.any(det <= 0):
-        return None
-    for arr in (origin_enu, hits_enu, sigma, road_enu, sym):
-        arr.setflags(write=False)
-    made: dict[int, Fix] = {}
-    for r, i in enumerate(order):
-        lo, hi = int(offsets[r]), int(offsets[r + 1])
-        if lo == hi:
-            continue
-        d_r = d[r]
-        # np.linalg.norm of a 1-D float array is sqrt(x.dot(x)); the same bits, one call.
-        norm = math.sqrt(d_r.dot(d_r))
-        if norm == 0.0:
-            return None
-        direction = d_r / norm
-        direction.setflags(write=False)
-        det_i = detections[i]
-        made[i] = Fix._trusted(
-            det_i.t_s,
-            det_i.sensor,
-            det_i.cls,
-            i,
-            origin_enu[r],
-            direction,
-            hits_enu[lo:hi],
-            sigma[lo:hi],
-            road_enu[r] if has_road[r] else None,
-            det_i.score,
-            sym[lo:hi],
-        )
-    return made
-
-
-def _checked_fixes(
-    detections: Sequence[Detection],
-    order: Sequence[int],
-    offsets: np.ndarray,
-    origin_enu: np.ndarray,
-    d: np.ndarray,
-    hits_enu: np.ndarray,
-    sigma: np.ndarray,
-    road_enu: np.ndarray,
-    has_road: np.ndarray,
-    cov: np.ndarray,
-) -> dict[int, Fix]:
-    """Fixes by :class:`Fix`'s validating constructor, one by one (see :func:`_trusted_fixes`)."""
-    made: dict[int, Fix] = {}
-    for r, i in enumerate(order):
-        lo, hi = int(offsets[r]), int(offsets[r + 1])
-        if lo == hi:
-            continue
-        det = detections[i]
-        made[i] = Fix(
-            t_s=det.t_s,
-            sensor=det.sensor,
-            cls=det.cls,
-            detection_index=i,
-            origin_enu=origin_enu[r],
-            direction_enu=d[r],
-            hits_enu=hits_enu[lo:hi],
-            hit_sigma_m=sigma[lo:hi],
-            road_hit_enu=road_enu[r] if has_road[r] else None,
-            score=det.score,
-            hit_cov_en_m2=cov[lo:hi],
-        )
-    return made

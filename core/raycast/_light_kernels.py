@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from numba import njit
 
-from ._kernels import HIT, MISS, _prepare, _walk
+from ._walk_kernels import HIT, MISS, _walk, prepare_row
 
 __all__ = ["cast_kernel_light"]
 
@@ -61,25 +61,10 @@ def cast_kernel_light(
     cap = buf.shape[1]
     hits = buf.reshape(buf.size)
     for i in range(n):
-        st, gx0, gy0, kx, ky, uz, t_a, t_end = _prepare(
-            elev,
-            nodes,
-            lvl_off,
-            lvl_shape,
-            x_min,
-            y_max,
-            cell,
-            z_min,
-            z_max,
-            margin,
-            origins[i, 0],
-            origins[i, 1],
-            origins[i, 2],
-            directions[i, 0],
-            directions[i, 1],
-            directions[i, 2],
-            max_range[i],
-        )
+        st, gx0, gy0, kx, ky, uz, t_a, t_end = prepare_row(
+            elev, nodes, lvl_off, lvl_shape, x_min, y_max, cell, z_min, z_max, margin,
+            origins, directions, max_range, i,
+        )  # fmt: skip
         crossed[i] = False
         truncated[i] = False
         counts[i] = 0

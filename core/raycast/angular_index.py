@@ -22,15 +22,17 @@ byte budget). Kernels: ``core.raycast._angular_kernels``; plain-numpy twin:
 
 from __future__ import annotations
 
+import functools
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numba
 import numpy as np
 
 from ..errors import RaycastError
-from . import _angular_kernels as _ak
+from . import _angular_index_kernels as _ak
 
 __all__ = [
     "DEFAULT_D_RHO_CELLS",
@@ -38,7 +40,9 @@ __all__ = [
     "AngularCache",
     "AngularIndex",
     "build_angular_index",
+    "index_arrays",
     "needed_azimuth_bins",
+    "no_index",
     "tree_levels",
 ]
 
@@ -360,3 +364,27 @@ class AngularCache:
         """Drop every index."""
         with self._lock:
             self._items.clear()
+
+
+def index_arrays(
+    ix: AngularIndex | SimpleNamespace,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, np.ndarray, float]:
+    """The index's arrays in the order the angular kernels take them."""
+    return (ix.tree, ix.t_off, ix.t_size, ix.slot_of_az, ix.d_rho, ix.start, ix.s_unit)
+
+
+@functools.cache
+def no_index() -> SimpleNamespace:
+    """Stand-in index with no azimuth bin built: every ray takes the pyramid walk."""
+    ix = SimpleNamespace(
+        tree=np.zeros((1, 1, 2), np.float32),
+        t_off=np.zeros(1, np.int64),
+        t_size=np.ones(1, np.int64),
+        slot_of_az=np.full(4, -1, np.int32),
+        d_rho=1.0,
+        start=np.zeros((1, 1, 2), np.int32),
+        s_unit=1.0,
+    )
+    for a in (ix.tree, ix.t_off, ix.t_size, ix.slot_of_az, ix.start):
+        a.setflags(write=False)  # as in a built index: one kernel signature
+    return ix

@@ -39,9 +39,12 @@ Ranges are metres along the unit direction; points are ``origin + range * unit``
 ``mode="all"`` the kernel keeps the first few hits per ray and re-walks the rare rays with
 more, straight into the CSR arrays. Large batches of rays with no shared origin are cast
 grouped by origin tile and direction, for locality (same answers). The kernels use numba's
-thread pool (``numba.set_num_threads``); :func:`warm_up` compiles them ahead of use. For a
-cold start, :func:`use_light_kernels` swaps in quick-to-compile twins with the same answers
-(``core.raycast._light_kernels``) until the fast kernels are ready.
+thread pool (``numba.set_num_threads``); ``core.warm`` compiles them ahead of use. For a
+cold start, :func:`~demtrack.core.raycast.light.use_light_kernels` swaps in quick-to-compile
+twins with the same answers (``core.raycast._light_kernels``) until the fast kernels are ready.
+
+The answer's types are in ``core.raycast.hits``, the first pass's scratch in
+``core.raycast.scratch``, the re-walk of rays with many hits in ``core.raycast.rewalk``.
 """
 
 from __future__ import annotations
@@ -49,11 +52,10 @@ from __future__ import annotations
 import contextlib
 import functools
 import threading
+import weakref
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from enum import IntEnum
-from types import SimpleNamespace
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numba
 import numpy as np
@@ -61,23 +63,39 @@ import numpy as np
 from ..errors import DemError, RaycastError
 from ..terrain.grid import GridSpec
 from . import _angular_kernels as _ak
+from . import _hit_kernels as _hk
 from . import _kernels as _k
 from . import _light_kernels as _lk
+from . import _ray_kernels as _rk
 from .angular_index import (
     DEFAULT_N_AZ,
     AngularCache,
     AngularIndex,
     build_angular_index,
+    index_arrays,
     needed_azimuth_bins,
+    no_index,
 )
+from .dem_arrays import DemArrays
 from .fresh_memory import without_huge_page_advice
+from .hits import BELOW_GROUND, HIT, MISS, OUTSIDE, UPWARD, RayHits, RayStatus
+from .light import light_kernels, light_kernels_on, use_light_kernels
 from .pyramid import MinMaxPyramid, build_pyramid
+from .rewalk import recast_light, refill
+from .scratch import _FIRST_PASS_HITS, _FIRST_PASS_HITS_RUNS, first_pass_scratch
+
+if TYPE_CHECKING:
+    from ..terrain.dem import Dem
 
 __all__ = [
     "BELOW_GROUND",
     "HIT",
     "MISS",
+    "HEIGHT_MARGIN_M",
+    "MIN_COHERENT_RUN",
+    "MIN_ORDERED_RAYS",
     "OUTSIDE",
+    "SERIAL_CAST_MAX_RAYS",
     "UPWARD",
     "RayCaster",
     "RayHits",
@@ -86,18 +104,14 @@ __all__ = [
     "light_kernels",
     "light_kernels_on",
     "use_light_kernels",
-    "warm_up",
 ]
 
 #: Slack (m) added around the terrain's height range and to every min/max test, so that a
 #: surface exactly at a node's max (a flat roof at the global max) is never skipped.
 HEIGHT_MARGIN_M = 1e-3
-#: Hits kept per ray in the first pass of ``mode="all"``; rays with more are re-walked.
-_FIRST_PASS_HITS = 4
-#: The same when the batch has runs of one origin (camera rays): their re-walks cost more
-#: than the larger buffer (2 % of the bench's camera rays have more than 4 hits, 0.2 %
-#: more than 8; re-walking them was ~15 % of an all-hits cast at two threads).
-_FIRST_PASS_HITS_RUNS = 8
+#: Casters of live DEMs (:meth:`RayCaster.for_dem`); an entry goes with its DEM.
+_CASTERS: weakref.WeakKeyDictionary[Dem, RayCaster] = weakref.WeakKeyDictionary()
+_CASTERS_LOCK = threading.Lock()
 #: Shortest run of consecutive rays sharing an origin that ``coherent=None`` casts with an
 #: angular index (building one costs about as much as casting ~50k rays without it).
 MIN_COHERENT_RUN = 20_000
@@ -106,163 +120,11 @@ MIN_COHERENT_RUN = 20_000
 #: against well under a millisecond of work).
 SERIAL_CAST_MAX_RAYS = 20_000
 #: Batches of at least this many rays without shared origins are cast in an order grouped
-#: by origin tile and direction (``raycast_kernels.ray_order_kernel``): random rays over a
+#: by origin tile and direction (``core.raycast._ray_kernels.ray_order_kernel``): random rays over a
 #: large DEM then find the nodes and cells they walk in cache (the bench's incoherent set:
 #: the walk itself 1.8x faster, a whole cast about 1.3x less CPU); below it the sort is not
 #: worth its pass.
 MIN_ORDERED_RAYS = 20_000
-#: First-pass scratch (the hits buffer and counts of a cast) of at least this many bytes
-#: is taken from a pool (``_SCRATCH``) instead of allocated: glibc maps blocks above 32 MB
-#: afresh on every call (1 M camera rays: 72 MB, 20-40 ms of page faults per all-hits
-#: cast), smaller ones it reuses from its heap.
-_SCRATCH_MIN_BYTES = 1 << 25
-#: Most buffers and bytes the pool keeps between casts (larger buffers are freed).
-_SCRATCH_MAX_BUFFERS = 2
-_SCRATCH_MAX_BYTES = 256 * 1024 * 1024
-
-
-class RayStatus(IntEnum):
-    """Outcome of one ray (stored as int8 in :attr:`RayHits.status`)."""
-
-    HIT = _k.HIT
-    MISS = _k.MISS
-    UPWARD = _k.UPWARD
-    BELOW_GROUND = _k.BELOW_GROUND
-    OUTSIDE = _k.OUTSIDE
-
-
-HIT = RayStatus.HIT
-MISS = RayStatus.MISS
-UPWARD = RayStatus.UPWARD
-BELOW_GROUND = RayStatus.BELOW_GROUND
-OUTSIDE = RayStatus.OUTSIDE
-
-
-@dataclass(frozen=True, eq=False)
-class RayHits:
-    """All surface crossings of a batch of rays, in CSR layout.
-
-    Parameters
-    ----------
-    offsets : ndarray, int64, shape (n + 1,)
-        Hits of ray ``i`` are rows ``offsets[i]:offsets[i+1]`` of ``range_m``/``points``.
-    range_m : ndarray, float64, shape (m,)
-        Distance (m) from the ray origin along the unit direction, increasing per ray.
-    points : ndarray, float64, shape (m, 3)
-        Crossing points in the DEM's local frame (x east, y north, z up; m).
-    status : ndarray, int8, shape (n,)
-        :class:`RayStatus` per ray.
-    crossed_nodata : ndarray, bool, shape (n,)
-        The ray passed over or through a hole, so a crossing may be missing.
-    truncated : ndarray, bool, shape (n,)
-        The ray had more crossings than ``max_hits``.
-    """
-
-    offsets: np.ndarray
-    range_m: np.ndarray
-    points: np.ndarray
-    status: np.ndarray
-    crossed_nodata: np.ndarray
-    truncated: np.ndarray
-
-    def __post_init__(self) -> None:
-        for name in ("offsets", "range_m", "points", "status", "crossed_nodata", "truncated"):
-            getattr(self, name).setflags(write=False)
-
-    @property
-    def n_rays(self) -> int:
-        """Number of rays ``n``."""
-        return int(len(self.status))
-
-    @property
-    def counts(self) -> np.ndarray:
-        """Number of hits per ray, int64 shape (n,)."""
-        return np.diff(self.offsets)
-
-    @property
-    def hit(self) -> np.ndarray:
-        """Boolean mask of rays with at least one hit, shape (n,)."""
-        return self.status == HIT
-
-    def first_range_m(self) -> np.ndarray:
-        """Range (m) of each ray's nearest hit, NaN where none; shape (n,)."""
-        out = np.full(self.n_rays, np.nan)
-        has = self.counts > 0
-        out[has] = self.range_m[self.offsets[:-1][has]]
-        return out
-
-    def first_points(self) -> np.ndarray:
-        """Each ray's nearest hit point (local frame, m), NaN rows where none; (n, 3)."""
-        out = np.full((self.n_rays, 3), np.nan)
-        has = self.counts > 0
-        out[has] = self.points[self.offsets[:-1][has]]
-        return out
-
-    def hits_of(self, i: int) -> tuple[np.ndarray, np.ndarray]:
-        """Ranges (k,) and points (k, 3) of ray ``i``'s hits, nearest first."""
-        if not -self.n_rays <= i < self.n_rays:
-            raise RaycastError(f"ray index {i} out of range for {self.n_rays} rays")
-        i %= self.n_rays
-        lo, hi = int(self.offsets[i]), int(self.offsets[i + 1])
-        return self.range_m[lo:hi], self.points[lo:hi]
-
-
-class _ScratchPool:
-    """A few float64 scratch buffers reused by casts (thread-safe).
-
-    :meth:`take` lends the smallest kept buffer with room for ``size`` items (or a new
-    one), :meth:`give` takes it back; at most ``max_buffers`` buffers and ``max_bytes``
-    bytes are kept (the smallest go first). A lent buffer belongs to one cast at a time;
-    its contents are stale, and no view of it may outlive the cast.
-    """
-
-    def __init__(
-        self, max_buffers: int = _SCRATCH_MAX_BUFFERS, max_bytes: int = _SCRATCH_MAX_BYTES
-    ) -> None:
-        self.max_buffers = max_buffers
-        self.max_bytes = max_bytes
-        self._free: list[np.ndarray] = []
-        self._lock = threading.Lock()
-
-    @property
-    def nbytes(self) -> int:
-        """Bytes kept between casts."""
-        with self._lock:
-            return sum(b.nbytes for b in self._free)
-
-    def take(self, size: int) -> np.ndarray:
-        """A 1-D float64 buffer of at least ``size`` items (uninitialised)."""
-        with self._lock:
-            fits = [i for i, b in enumerate(self._free) if len(b) >= size]
-            if fits:
-                return self._free.pop(min(fits, key=lambda i: len(self._free[i])))
-        return np.empty(size, np.float64)
-
-    def give(self, buf: np.ndarray) -> None:
-        """Return a buffer from :meth:`take` (kept if the bounds allow)."""
-        if buf.nbytes > self.max_bytes:
-            return
-        with self._lock:
-            self._free.append(buf)
-            self._free.sort(key=len, reverse=True)
-            while self._free and (
-                len(self._free) > self.max_buffers
-                or sum(b.nbytes for b in self._free) > self.max_bytes
-            ):
-                self._free.pop()
-
-    @contextlib.contextmanager
-    def lend(self, size: int) -> Iterator[np.ndarray]:
-        """:meth:`take` for the ``with`` block, then :meth:`give`."""
-        buf = self.take(size)
-        try:
-            yield buf
-        finally:
-            self.give(buf)
-
-
-#: First-pass scratch shared by all casters (so the memory it keeps is bounded per process).
-_SCRATCH = _ScratchPool()
 
 
 @dataclass(frozen=True, eq=False)
@@ -298,7 +160,28 @@ class RayCaster:
             raise DemError(f"elevation has shape {elev.shape}, grid says {grid.shape}")
         if np.isinf(elev).any():
             raise DemError("elevation contains infinite values (nodata must be NaN)")
-        return cls(grid, elev, build_pyramid(elev, use_kernel=not _LIGHT.on))
+        return cls(grid, elev, build_pyramid(elev, use_kernel=not light_kernels_on()))
+
+    @classmethod
+    def for_dem(cls, dem: Dem) -> RayCaster:
+        """The caster of ``dem``: built on first use, then shared while ``dem`` lives.
+
+        Safe to cache: a :class:`~demtrack.core.terrain.dem.Dem` is frozen and its
+        elevation array is read-only. ``cast_rays(dem, ...)`` uses it, so every caller
+        shares one min/max pyramid.
+        """
+        with _CASTERS_LOCK:
+            cached = _CASTERS.get(dem)
+        if cached is None:
+            cached = cls.from_dem(dem)
+            with _CASTERS_LOCK:
+                cached = _CASTERS.setdefault(dem, cached)
+        return cached
+
+    @functools.cached_property
+    def kernel_dem(self) -> DemArrays:
+        """The grid, elevations and pyramid as the kernels take them (packed once)."""
+        return DemArrays.pack(self.grid, self.elevation, self.pyramid, HEIGHT_MARGIN_M)
 
     def prepare_origin(
         self, origin: np.ndarray, directions: np.ndarray | None = None
@@ -363,7 +246,8 @@ class RayCaster:
         coherent: bool | None = None,
     ) -> RayHits:
         """Cast rays; see :func:`cast_rays`."""
-        return self._cast(origins, directions, max_range, mode, max_hits, coherent, light=_LIGHT.on)
+        light = light_kernels_on()
+        return self._cast(origins, directions, max_range, mode, max_hits, coherent, light=light)
 
     def _cast(
         self,
@@ -396,21 +280,8 @@ class RayCaster:
                 runs = _ak.origin_runs_kernel(o, min_run, numba.get_num_threads())
         keep = _FIRST_PASS_HITS_RUNS if len(runs) else _FIRST_PASS_HITS
         cap = 1 if first else min(keep, max_hits)
-        with self._first_pass_scratch(n, cap) as (buf, counts):
+        with first_pass_scratch(n, cap) as (buf, counts):
             return self._cast_into(o, d, rng, first, max_hits, cap, runs, light, buf, counts)
-
-    @contextlib.contextmanager
-    def _first_pass_scratch(self, n: int, cap: int) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-        """The first pass's hits buffer ``(n, cap)`` and counts ``(n,)``, pooled when large.
-
-        Neither escapes the cast: hits are copied out by the gather, counts summed.
-        """
-        size = n * (cap + 1)
-        if size * 8 < _SCRATCH_MIN_BYTES:
-            yield np.empty((n, cap), np.float64), np.empty(n, np.int64)
-            return
-        with _SCRATCH.lend(size) as raw:
-            yield raw[: n * cap].reshape(n, cap), raw[n * cap : size].view(np.int64)
 
     def _cast_into(
         self,
@@ -430,22 +301,7 @@ class RayCaster:
         status = np.empty(n, np.int8)
         crossed = np.empty(n, bool)
         truncated = np.empty(n, bool)
-        g, p = self.grid, self.pyramid
-        args = (
-            self.elevation,
-            p.nodes,
-            p.level_offsets,
-            p.level_shapes,
-            float(g.x_min),
-            float(g.y_max),
-            float(g.cell_m),
-            p.z_min,
-            p.z_max,
-            HEIGHT_MARGIN_M,
-            o,
-            d,
-            rng,
-        )
+        args = (*self.kernel_dem, o, d, rng)
         with _threads_for(n):
             threads = numba.get_num_threads()
             outs = (buf, counts, status, crossed, truncated)
@@ -466,14 +322,14 @@ class RayCaster:
                 points = np.empty((m, 3), np.float64)
             # Hits that fit the first-pass buffer are copied (with their points); the few
             # rays with more are re-walked straight into their CSR slots.
-            _k.gather_hits_kernel(buf, counts, offsets, o, d, range_m, points)
+            _hk.gather_hits_kernel(buf, counts, offsets, o, d, range_m, points)
             if not first:
                 big = np.flatnonzero(counts > cap).astype(np.int64)
                 if len(big) and light:
-                    _recast_light(args, threads, big, max_hits, offsets, range_m, points)
+                    recast_light(args, threads, big, max_hits, offsets, range_m, points)
                 elif len(big):
-                    _refill(args, max_hits, big, offsets, range_m, indexed)
-                    _k.hit_points_kernel(o, d, big, offsets, range_m, points)
+                    refill(args, max_hits, big, offsets, range_m, indexed)
+                    _hk.hit_points_kernel(o, d, big, offsets, range_m, points)
         return RayHits(offsets, range_m, points, status, crossed, truncated)
 
     def _cast_ordered(
@@ -502,7 +358,7 @@ class RayCaster:
         g = self.grid
         o_s, d_s, rng_s = np.empty_like(o), np.empty_like(d), np.empty_like(rng)
         geo = (float(g.x_min), float(g.y_max), float(g.cell_m), *g.shape, threads)
-        order = _k.ray_order_kernel(o, d, rng, *geo, o_s, d_s, rng_s)
+        order = _rk.ray_order_kernel(o, d, rng, *geo, o_s, d_s, rng_s)
         _k.cast_kernel(*args[:-3], o_s, d_s, rng_s, first, max_hits, threads, order, *outs)  # type: ignore[call-arg]
 
     def _cast_runs(
@@ -528,7 +384,7 @@ class RayCaster:
         a = 0
         for r0, r1 in runs.tolist() + [[n, n]]:
             if a < r0:  # the pyramid walk: the same kernel with no azimuth bin built
-                nix = _index_args(_no_index())
+                nix = index_arrays(no_index())
                 _ak.cast_angular_kernel(  # type: ignore[call-arg]
                     *args, first, max_hits, threads, *nix, a, r0, *outs, unbuilt, False
                 )
@@ -536,7 +392,7 @@ class RayCaster:
                 ix = self.angular.get(o[r0])
                 if ix is None:
                     ix = self._index_for(o[r0], d, r0, r1)
-                ixa = _index_args(ix)
+                ixa = index_arrays(ix)
                 _ak.cast_angular_kernel(  # type: ignore[call-arg]
                     *args, first, max_hits, threads, *ixa, r0, r1, *outs, unbuilt, True
                 )
@@ -545,64 +401,6 @@ class RayCaster:
                     self._index_for(o[r0], d, r0, r1)
             a = r1
         return indexed
-
-
-def _recast_light(
-    args: tuple[Any, ...],
-    threads: int,
-    big: np.ndarray,
-    max_hits: int,
-    offsets: np.ndarray,
-    range_m: np.ndarray,
-    points: np.ndarray,
-) -> None:
-    """Light kernels' re-walk: cast rays ``big`` again with room for all their hits.
-
-    The same walk as the first pass, so the same hits; written into their CSR slots.
-    Every array has the first pass's dtype and layout: no kernel compiles for this.
-    """
-    o, d, rng = args[-3:]
-    sub = (*args[:-3], o[big], d[big], rng[big])
-    nb = len(big)
-    buf = np.empty((nb, max_hits), np.float64)
-    counts = np.empty(nb, np.int64)
-    flags = (np.empty(nb, np.int8), np.empty(nb, bool), np.empty(nb, bool))
-    _lk.cast_kernel_light(*sub, False, max_hits, threads, buf, counts, *flags)  # type: ignore[call-arg]
-    sub_off = np.zeros(nb + 1, np.int64)
-    np.cumsum(counts, out=sub_off[1:])
-    m = int(sub_off[-1])
-    sub_range = np.empty(m, np.float64)
-    sub_points = np.empty((m, 3), np.float64)
-    _k.gather_hits_kernel(buf, counts, sub_off, sub[-3], sub[-2], sub_range, sub_points)
-    slots = np.repeat(offsets[big] - sub_off[:-1], counts) + np.arange(m)
-    range_m[slots] = sub_range
-    points[slots] = sub_points
-
-
-def _refill(
-    args: tuple[Any, ...],
-    max_hits: int,
-    big: np.ndarray,
-    offsets: np.ndarray,
-    range_m: np.ndarray,
-    indexed: list[tuple[int, int, AngularIndex]],
-) -> None:
-    """Re-walk rays ``big`` (sorted) with all their hits, into their CSR slots.
-
-    Rays of an indexed run take the angular walk they were cast with; the rest the
-    pyramid walk. Either way the first pass's walk, so the same hits.
-    """
-    rest = np.ones(len(big), bool)
-    for r0, r1, ix in indexed:
-        i0, i1 = np.searchsorted(big, [r0, r1]).tolist()
-        if i0 < i1:
-            _ak.cast_angular_refill_kernel(  # type: ignore[call-arg]
-                *args, max_hits, *_index_args(ix), big[i0:i1], offsets, range_m
-            )
-            rest[i0:i1] = False
-    if rest.any():
-        left = big if rest.all() else big[rest]
-        _k.cast_all_refill_kernel(*args, max_hits, left, offsets, range_m)  # type: ignore[call-arg]
 
 
 @contextlib.contextmanager
@@ -617,29 +415,6 @@ def _threads_for(n: int) -> Iterator[None]:
         yield
     finally:
         numba.set_num_threads(threads)
-
-
-def _index_args(
-    ix: AngularIndex | SimpleNamespace,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, np.ndarray, float]:
-    return (ix.tree, ix.t_off, ix.t_size, ix.slot_of_az, ix.d_rho, ix.start, ix.s_unit)
-
-
-@functools.cache
-def _no_index() -> SimpleNamespace:
-    """Stand-in index with no azimuth bin built: every ray takes the pyramid walk."""
-    ix = SimpleNamespace(
-        tree=np.zeros((1, 1, 2), np.float32),
-        t_off=np.zeros(1, np.int64),
-        t_size=np.ones(1, np.int64),
-        slot_of_az=np.full(4, -1, np.int32),
-        d_rho=1.0,
-        start=np.zeros((1, 1, 2), np.int32),
-        s_unit=1.0,
-    )
-    for a in (ix.tree, ix.t_off, ix.t_size, ix.slot_of_az, ix.start):
-        a.setflags(write=False)  # as in a built index: one kernel signature
-    return ix
 
 
 def cast_rays(
@@ -694,8 +469,8 @@ def cast_rays(
     """
     if isinstance(dem, RayCaster):
         caster = dem
-    elif callable(getattr(dem, "ray_caster", None)):
-        caster = dem.ray_caster()  # a Dem keeps its pyramid: built once, shared
+    elif _is_frozen_value(dem):
+        caster = RayCaster.for_dem(dem)  # a Dem keeps its pyramid: built once, shared
     else:
         caster = RayCaster.from_dem(dem)
     return caster.cast(
@@ -703,110 +478,14 @@ def cast_rays(
     )
 
 
-class _LightState:
-    """Whether casts use the light kernels (``core.raycast._light_kernels``)."""
+def _is_frozen_value(dem: Any) -> bool:
+    """Whether ``dem`` is a frozen dataclass (a :class:`~demtrack.core.terrain.dem.Dem`).
 
-    on = False
-
-
-_LIGHT = _LightState()
-
-
-def use_light_kernels(enabled: bool = True) -> None:
-    """Cast with the light kernels (``True``) or the fast ones (``False``, the default).
-
-    The light kernels give the same answers bit for bit and compile in well under half the
-    time; they cast on one thread (releasing the GIL), a new caster builds its min/max
-    pyramid in plain numpy, and ``coherent=None`` builds no angular index
-    (``coherent=True`` still does). For a process whose numba cache is cold and that
-    needs answers before the fast kernels could compile (the sample-site build's renders,
-    ``demtrack demo`` until its warm-up is done). Process-wide; :func:`warm_up` turns them
-    off once the fast kernels are ready.
+    Its arrays cannot change under a cached caster. Tested by shape, not by importing
+    ``Dem``: the terrain package is below this one and ``Dem.ray_caster`` calls back here.
     """
-    _LIGHT.on = bool(enabled)
-
-
-def light_kernels_on() -> bool:
-    """Whether casts use the light kernels (see :func:`use_light_kernels`)."""
-    return _LIGHT.on
-
-
-@contextlib.contextmanager
-def light_kernels() -> Iterator[None]:
-    """Cast with the light kernels inside the block; the previous choice after it."""
-    before = _LIGHT.on
-    _LIGHT.on = True
-    try:
-        yield
-    finally:
-        _LIGHT.on = before
-
-
-def warm_up(angular: bool = True) -> None:
-    """Compile (or load from numba's on-disk cache) every kernel, on a tiny DEM.
-
-    The server calls this at start-up so the first real request does not pay for
-    compilation (about 25 s of CPU cold for the pyramid kernels, about 60 s more for the
-    angular-index kernels; well under a second from the cache).
-
-    Parameters
-    ----------
-    angular : bool
-        Also compile the angular-index kernels, used only by casts of at least
-        ``MIN_COHERENT_RUN`` rays from one origin (or ``coherent=True``), and the sort of
-        batches of at least ``MIN_ORDERED_RAYS`` rays without shared origins.
-
-    Notes
-    -----
-    It always warms the fast kernels, then turns the light ones off
-    (:func:`use_light_kernels`): casts switch to the fast kernels once they are ready.
-    """
-    elev = np.arange(16, dtype=np.float32).reshape(4, 4)
-    elev[0, 0] = np.nan
-    build_pyramid(elev)  # the kernel, even while light kernels are on
-    caster = RayCaster.from_dem(SimpleNamespace(grid=GridSpec(0.0, 4.0, 1.0, 4, 4), elevation=elev))
-    o = np.array([[2.0, 2.0, 100.0], [0.5, 3.5, 100.0]])
-    d = np.array([[0.1, 0.1, -1.0], [0.0, 0.0, -1.0]])
-    caster._cast(o, d, np.inf, "first", 256, None, light=False)
-    caster._cast(o, d, np.inf, "all", 8, None, light=False)
-    if angular:
-        # The angular-index path (camera rays): build, cast, and the pyramid walk between
-        # runs; and the sort of large incoherent batches. Both serve only batches of at
-        # least 20,000 rays, which the server's requests are not: it warms without them
-        # (about 7 s of CPU less in a cold start).
-        _warm_angular(caster)
-        g, rng = caster.grid, np.full(len(o), np.inf)
-        copies = (np.empty_like(o), np.empty_like(d), np.empty_like(rng))
-        geo = (float(g.x_min), float(g.y_max), float(g.cell_m), *g.shape, 1)
-        _k.ray_order_kernel(o, d, rng, *geo, *copies)
-    # A level ray over a zig-zag crosses more often than the first pass keeps: this
-    # compiles the re-walk kernel too.
-    _zigzag_cast(None)
-    use_light_kernels(False)
-
-
-def _zigzag_cast(coherent: bool | None) -> None:
-    """A level ray over a zig-zag: 12 crossings, more than either first pass keeps."""
-    zig = np.tile(np.array([0.0, 10.0], np.float32), 12)
-    zigzag = SimpleNamespace(grid=GridSpec(0.0, 2.0, 1.0, 2, 24), elevation=np.vstack([zig, zig]))
-    RayCaster.from_dem(zigzag)._cast(
-        np.array([[0.5, 1.0, 5.0]]),
-        np.array([[1.0, 0.0, 0.0]]),
-        np.inf,
-        "all",
-        256,
-        coherent,
-        light=False,
-    )
-
-
-def _warm_angular(caster: RayCaster) -> None:
-    """Compile the angular-index kernels (build, cast, the walk between runs, re-walk)."""
-    o3 = np.array([[2.0, 2.0, 100.0], [2.0, 2.0, 100.0], [0.5, 3.5, 100.0]])
-    d3 = np.array([[0.1, 0.1, -1.0], [0.2, -0.1, -1.0], [0.0, 0.0, -1.0]])
-    caster._cast(o3, d3, np.inf, "first", 256, True, light=False)
-    caster._cast(o3, d3, np.inf, "all", 8, True, light=False)
-    _zigzag_cast(True)
+    params = getattr(type(dem), "__dataclass_params__", None)
+    return bool(params is not None and params.frozen)
 
 
 def _validate_rays(
@@ -829,7 +508,7 @@ def _validate_rays(
     # A fresh writable C array always, so the kernels see one signature only.
     rng = np.array(rng, dtype=np.float64)
     with _threads_for(len(o)):
-        code, i = _k.check_rays_kernel(o, d, rng, numba.get_num_threads())
+        code, i = _rk.check_rays_kernel(o, d, rng, numba.get_num_threads())
     if code == 1:
         raise RaycastError(f"origins must be finite (ray {i} is not)")
     if code == 2:

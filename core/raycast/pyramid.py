@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import DemError
-from ._kernels import build_pyramid_kernel
+from ._pyramid_kernels import build_pyramid_kernel
 
 __all__ = ["MinMaxPyramid", "build_pyramid", "pyramid_level_shapes", "pyramid_levels_numpy"]
 

@@ -207,7 +207,7 @@ def angular_leaves_reference(
         ``[..., 0]`` max and ``[..., 1]`` min angle (m per cell); empty bins
         ``(-inf, +inf)``, bins touching a hole ``(+inf, -inf)``.
     """
-    from ._angular_kernels import P_EPS, RHO_EPS  # the same slacks as the kernels
+    from ._angular_index_kernels import P_EPS, RHO_EPS  # the same slacks as the kernels
 
     e = np.asarray(elevation, np.float32)
     nrows, ncols = e.shape

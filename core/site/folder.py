@@ -30,7 +30,7 @@ from typing import Any
 
 from ..camera.pantilt import PanTiltHead
 from ..camera.pinhole import Camera
-from ..errors import DemtrackError, SiteError
+from ..errors import DemtrackError, SiteError, UnknownSensorError
 from ..geo.geodesy import LocalFrame
 from ..geolocation.geolocate import Geolocator
 from ..geolocation.roads import RoadNetwork
@@ -112,12 +112,19 @@ class Site:
     geoid_undulation_m: float = 0.0
 
     def sensor(self, sensor_id: str) -> Sensor:
-        """The sensor called ``sensor_id``; :class:`SiteError` names the known ones if absent."""
+        """The sensor called ``sensor_id``.
+
+        Raises
+        ------
+        UnknownSensorError
+            If the site has none by that id (the message names the known ones).
+        """
         try:
             return self.sensors[sensor_id]
         except KeyError:
             known = ", ".join(sorted(self.sensors)) or "none"
-            raise SiteError(f"unknown sensor {sensor_id!r}; this site has: {known}") from None
+            msg = f"unknown sensor {sensor_id!r}; this site has: {known}"
+            raise UnknownSensorError(msg) from None
 
     def geolocator(self, **kwargs: Any) -> Geolocator:
         """A :class:`Geolocator` on this site's DEM, frame and roads."""

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import shapely
 
-from ..activity.detectors import Zone
+from ..activity.zones import Zone
 from ..errors import InputFileError
 from ..geo.geodesy import LocalFrame
 from ..io.geojson_io import read_features

@@ -21,7 +21,7 @@ import numpy as np
 from affine import Affine
 
 from ..errors import CrsError, DemError, InputFileError
-from .geodesy import (
+from ..geo.geodesy import (
     WGS84_A_M,
     WGS84_F,
     LocalFrame,

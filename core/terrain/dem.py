@@ -246,16 +246,13 @@ class Dem:
     def ray_caster(self) -> RayCaster:
         """Return the DEM prepared for ray casting; built on first use, then shared.
 
-        Safe to cache: a ``Dem`` is frozen and its elevation array is read-only.
-        ``cast_rays(dem, ...)`` uses it, so every caller shares one min/max pyramid.
+        The same caster as :meth:`RayCaster.for_dem(dem)
+        <demtrack.core.raycast.cast.RayCaster.for_dem>`, which holds the cache (callers in
+        the library use that; this method stays for code that has a ``Dem`` only).
         """
-        cached = self.__dict__.get("_ray_caster")
-        if cached is None:
-            from ..raycast.cast import RayCaster  # numba loads only when rays are cast
+        from ..raycast.cast import RayCaster  # numba loads only when rays are cast
 
-            cached = RayCaster.from_dem(self)
-            object.__setattr__(self, "_ray_caster", cached)
-        return cached
+        return RayCaster.for_dem(self)
 
     # ------------------------------------------------------------------ GeoTIFF
     def write(self, path: str | Path) -> None:

@@ -242,8 +242,9 @@ class Fix:
         No copy and no check: the caller guarantees what the public constructor would
         (float ``t_s``, a known class, int index, read-only finite float64 arrays of the
         documented shapes, a unit ``direction_enu``, positive ``hit_sigma_m``, symmetric
-        positive definite ``hit_cov_en_m2``). For batch builders such as
-        :func:`demtrack.core.geolocation.fix_builder.build_fixes`, which check whole arrays at once.
+        positive definite ``hit_cov_en_m2``). For :meth:`from_arrays` (the one
+        public way to make many fixes at once) and the fusion of ``core.tracking``, which
+        check whole arrays first.
         """
         fix = object.__new__(cls)
         # the instance dict filled at once (what object.__setattr__ per field does, at a
@@ -263,6 +264,115 @@ class Fix:
         )
         return fix
 
+    @classmethod
+    def from_arrays(
+        cls,
+        t_s: Sequence[float],
+        sensor: Sequence[str],
+        obj_cls: Sequence[str],
+        detection_index: Sequence[int],
+        origin_enu: object,
+        direction_enu: object,
+        hit_offsets: object,
+        hits_enu: object,
+        hit_sigma_m: object,
+        road_hit_enu: object | None = None,
+        has_road: object | None = None,
+        score: Sequence[float | None] | None = None,
+        hit_cov_en_m2: object | None = None,
+        has_cov: object | None = None,
+    ) -> list[Fix]:
+        """Many fixes from stacked arrays, validated once over the whole arrays.
+
+        The fixes the public constructor makes of each row (same arithmetic, bit for
+        bit: the direction normalised, the covariances symmetrised), without its
+        per-fix copies and checks. When a check over the arrays fails, every fix goes
+        through the constructor, which names the problem (:class:`TrackingError`).
+
+        Parameters
+        ----------
+        t_s, sensor, obj_cls, detection_index : sequence, length n
+            Per fix: time (s), sensor id, class, detection index.
+        origin_enu, direction_enu : array_like, shape (n, 3)
+            Ray origins and (not necessarily unit) directions, local frame (m).
+        hit_offsets : array_like of int, shape (n + 1,)
+            Fix ``r``'s hits are rows ``hit_offsets[r]:hit_offsets[r + 1]`` of the hit
+            arrays (non-decreasing, from 0 to ``k``).
+        hits_enu : array_like, shape (k, 3)
+            Every fix's terrain hits, nearest first, local frame (m).
+        hit_sigma_m : array_like, shape (k,)
+            1-sigma horizontal uncertainty of each hit (m, > 0).
+        road_hit_enu : array_like, shape (n, 3), optional
+            Road-rule points; rows where ``has_road`` is false are not read.
+        has_road : array_like of bool, shape (n,), optional
+            Which fixes have a road point (default: all, when ``road_hit_enu`` is given).
+        score : sequence of float or None, length n, optional
+            Detector confidences (default: None for every fix).
+        hit_cov_en_m2 : array_like, shape (k, 2, 2), optional
+            Horizontal covariance of each hit (m^2).
+        has_cov : array_like of bool, shape (n,), optional
+            Which fixes carry covariances (default: all, when ``hit_cov_en_m2`` is given);
+            the covariance rows of the others are not read.
+
+        Returns
+        -------
+        list of Fix
+            One per row, in row order.
+        """
+        n = len(t_s)
+        rows = _FixRows.of(
+            n, origin_enu, direction_enu, hit_offsets, hits_enu, hit_sigma_m,
+            road_hit_enu, has_road, hit_cov_en_m2, has_cov,
+        )  # fmt: skip
+        scores = [None] * n if score is None else list(score)
+        try:
+            times_ok = bool(np.isfinite(np.asarray(t_s, dtype=np.float64)).all())
+        except (TypeError, ValueError):
+            times_ok = False
+        if (
+            rows is None
+            or not times_ok
+            or len(sensor) != n
+            or len(obj_cls) != n
+            or len(detection_index) != n
+            or len(scores) != n
+            or not all(c in CLASSES for c in obj_cls)
+            or not all(isinstance(s, str) for s in sensor)
+        ):
+            return _checked_fixes(
+                t_s, sensor, obj_cls, detection_index, origin_enu, direction_enu,
+                hit_offsets, hits_enu, hit_sigma_m, road_hit_enu, has_road, scores,
+                hit_cov_en_m2, has_cov,
+            )  # fmt: skip
+        out: list[Fix] = []
+        offsets = rows.offsets.tolist()
+        d_all = rows.direction
+        for r in range(n):
+            lo, hi = offsets[r], offsets[r + 1]
+            d_r = d_all[r]
+            # np.linalg.norm of a 1-D float array is sqrt(x.dot(x)): the same bits, one call
+            norm = math.sqrt(d_r.dot(d_r))
+            if norm == 0.0:
+                raise TrackingError("direction_enu must be non-zero")
+            direction = d_r / norm
+            direction.setflags(write=False)
+            out.append(
+                cls._trusted(
+                    float(t_s[r]),
+                    sensor[r],
+                    obj_cls[r],  # type: ignore[arg-type]
+                    int(detection_index[r]),
+                    rows.origin[r],
+                    direction,
+                    rows.hits[lo:hi],
+                    rows.sigma[lo:hi],
+                    rows.road[r] if rows.has_road[r] else None,
+                    scores[r],
+                    rows.cov[lo:hi] if rows.cov is not None and rows.has_cov[r] else None,
+                )
+            )
+        return out
+
     @property
     def n_hits(self) -> int:
         """Number of terrain hits ``k``."""
@@ -273,6 +383,156 @@ class Fix:
         if self.hit_cov_en_m2 is not None:
             return self.hit_cov_en_m2
         return self.hit_sigma_m[:, None, None] ** 2 * np.eye(2)[None]
+
+
+@dataclass(frozen=True, eq=False)
+class _FixRows:
+    """The arrays of :meth:`Fix.from_arrays`, checked as wholes (read-only float64)."""
+
+    offsets: np.ndarray
+    origin: np.ndarray
+    direction: np.ndarray
+    hits: np.ndarray
+    sigma: np.ndarray
+    road: np.ndarray
+    has_road: np.ndarray
+    cov: np.ndarray | None
+    has_cov: np.ndarray
+
+    @classmethod
+    def of(
+        cls,
+        n: int,
+        origin_enu: object,
+        direction_enu: object,
+        hit_offsets: object,
+        hits_enu: object,
+        hit_sigma_m: object,
+        road_hit_enu: object | None,
+        has_road: object | None,
+        hit_cov_en_m2: object | None,
+        has_cov: object | None,
+    ) -> _FixRows | None:
+        """The checked arrays, or None when any check the constructor makes would fail."""
+        try:
+            origin = np.asarray(origin_enu, dtype=np.float64).reshape(-1, 3)
+            d = np.asarray(direction_enu, dtype=np.float64).reshape(-1, 3)
+            offsets = np.asarray(hit_offsets, dtype=np.int64).reshape(-1)
+            hits = np.asarray(hits_enu, dtype=np.float64).reshape(-1, 3)
+            sigma = np.asarray(hit_sigma_m, dtype=np.float64).reshape(-1)
+            road = (
+                np.zeros((n, 3))
+                if road_hit_enu is None
+                else np.asarray(road_hit_enu, dtype=np.float64).reshape(-1, 3)
+            )
+            with_road = np.broadcast_to(
+                np.asarray(road_hit_enu is not None if has_road is None else has_road, dtype=bool),
+                (n,),
+            )
+            cov = (
+                None
+                if hit_cov_en_m2 is None
+                else np.asarray(hit_cov_en_m2, dtype=np.float64).reshape(-1, 2, 2)
+            )
+            with_cov = np.broadcast_to(
+                np.asarray(cov is not None if has_cov is None else has_cov, dtype=bool), (n,)
+            )
+        except (TypeError, ValueError):
+            return None
+        k = len(hits)
+        if (
+            len(origin) != n
+            or len(d) != n
+            or offsets.shape != (n + 1,)
+            or len(road) != n
+            or len(sigma) != k
+            or (cov is not None and len(cov) != k)
+            or (n and (offsets[0] != 0 or offsets[-1] != k or np.any(np.diff(offsets) < 0)))
+            or (not n and k)
+        ):
+            return None
+        cov_rows = np.repeat(with_cov, np.diff(offsets)) if n else np.zeros(0, dtype=bool)
+        if not (
+            np.isfinite(origin).all()
+            and np.isfinite(d).all()
+            and np.isfinite(hits).all()
+            and np.isfinite(sigma).all()
+            and np.isfinite(road[with_road]).all()
+        ) or np.any(sigma <= 0):
+            return None
+        sym = None
+        if cov is not None:
+            used = cov[cov_rows]
+            if not np.isfinite(used).all():
+                return None
+            sym = 0.5 * (cov + np.swapaxes(cov, 1, 2))
+            s = sym[cov_rows]
+            det = s[:, 0, 0] * s[:, 1, 1] - s[:, 0, 1] ** 2
+            if np.any(s[:, 0, 0] <= 0) or np.any(det <= 0):
+                return None
+            sym.setflags(write=False)
+        for arr in (origin, hits, sigma, road):
+            arr.setflags(write=False)
+        return cls(offsets, origin, d, hits, sigma, road, with_road, sym, with_cov)
+
+
+def _checked_fixes(
+    t_s: Sequence[float],
+    sensor: Sequence[str],
+    obj_cls: Sequence[str],
+    detection_index: Sequence[int],
+    origin_enu: object,
+    direction_enu: object,
+    hit_offsets: object,
+    hits_enu: object,
+    hit_sigma_m: object,
+    road_hit_enu: object | None,
+    has_road: object | None,
+    score: Sequence[float | None],
+    hit_cov_en_m2: object | None,
+    has_cov: object | None,
+) -> list[Fix]:
+    """:meth:`Fix.from_arrays` through the validating constructor, fix by fix."""
+    n = len(t_s)
+    try:
+        offsets = np.asarray(hit_offsets, dtype=np.int64).reshape(-1)
+        origin = np.asarray(origin_enu, dtype=object).reshape(-1, 3)
+        d = np.asarray(direction_enu, dtype=object).reshape(-1, 3)
+        hits = np.asarray(hits_enu, dtype=object).reshape(-1, 3)
+        sigma = np.asarray(hit_sigma_m, dtype=object).reshape(-1)
+        road = None if road_hit_enu is None else np.asarray(road_hit_enu, dtype=object)
+        road = None if road is None else road.reshape(-1, 3)
+        cov = None if hit_cov_en_m2 is None else np.asarray(hit_cov_en_m2, dtype=object)
+        cov = None if cov is None else cov.reshape(-1, 2, 2)
+    except (TypeError, ValueError) as err:
+        raise TrackingError(f"fix arrays are malformed: {err}") from err
+    if offsets.shape != (n + 1,) or not (len(origin) == len(d) == len(sensor) == n):
+        raise TrackingError(f"fix arrays must hold {n} fixes (hit_offsets: {n + 1} entries)")
+    with_road = np.broadcast_to(
+        np.asarray(road is not None if has_road is None else has_road, dtype=bool), (n,)
+    )
+    with_cov = np.broadcast_to(
+        np.asarray(cov is not None if has_cov is None else has_cov, dtype=bool), (n,)
+    )
+    out = []
+    for r in range(n):
+        lo, hi = int(offsets[r]), int(offsets[r + 1])
+        out.append(
+            Fix(
+                t_s=t_s[r],
+                sensor=sensor[r],
+                cls=obj_cls[r],  # type: ignore[arg-type]
+                detection_index=detection_index[r],
+                origin_enu=origin[r],
+                direction_enu=d[r],
+                hits_enu=hits[lo:hi],
+                hit_sigma_m=sigma[lo:hi],
+                road_hit_enu=road[r] if road is not None and with_road[r] else None,
+                score=score[r],
+                hit_cov_en_m2=cov[lo:hi] if cov is not None and with_cov[r] else None,
+            )
+        )
+    return out
 
 
 @dataclass(frozen=True, eq=False)

@@ -27,7 +27,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ..raycast import _kernels as _rk
+from ..raycast import _walk_kernels as _rk
 
 __all__ = [
     "NO_HORIZON",

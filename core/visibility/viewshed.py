@@ -35,7 +35,7 @@ from scipy import ndimage
 
 from ..camera.pinhole import Camera
 from ..errors import CameraError
-from ..raycast.cast import HEIGHT_MARGIN_M, cast_rays
+from ..raycast.cast import RayCaster, cast_rays
 from ..terrain.dem import Dem
 from . import _viewshed_kernels as _vk
 from .target_heights import DEFAULT_TARGET_HEIGHT_M
@@ -252,13 +252,11 @@ def _sweep(
     _vk.boundary_kernel(seen, cand, edge)
     checked = cand & (unsure | edge)
     idx = np.flatnonzero(checked)
-    caster = dem.ray_caster()
-    p = caster.pyramid
+    dem_arrays = RayCaster.for_dem(dem).kernel_dem
     for k in range(0, len(idx), _BATCH):
         _vk.refine_kernel(
-            caster.elevation, p.nodes, p.level_offsets, p.level_shapes, float(g.x_min),
-            float(g.y_max), float(g.cell_m), p.z_min, p.z_max, HEIGHT_MARGIN_M, c[0], c[1], c[2],
-            th, curv, _TARGET_TOL_REL, _TARGET_TOL_M, cand, seen, checked, idx[k : k + _BATCH],
+            *dem_arrays, c[0], c[1], c[2], th, curv, _TARGET_TOL_REL, _TARGET_TOL_M, cand,
+            seen, checked, idx[k : k + _BATCH],
         )  # fmt: skip
         report(min(0.1 + 0.9 * min(k + _BATCH, len(idx)) / len(idx), 1.0))
     return seen

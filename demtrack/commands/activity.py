@@ -19,15 +19,10 @@ def _given(**values: float | None) -> dict[str, Any]:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from demtrack.core.activity.detectors import (
-        ConvoyParams,
-        LoiterParams,
-        RendezvousParams,
-        detect_convoys,
-        detect_loitering,
-        detect_rendezvous,
-        detect_zone_crossings,
-    )
+    from demtrack.core.activity.convoy import ConvoyParams, detect_convoys
+    from demtrack.core.activity.loitering import LoiterParams, detect_loitering
+    from demtrack.core.activity.rendezvous import RendezvousParams, detect_rendezvous
+    from demtrack.core.activity.zones import detect_zone_crossings
     from demtrack.core.site.folder import load_site
     from demtrack.core.site.zone_io import read_zones_geojson
 

@@ -22,10 +22,14 @@ def _source_vertical_datum(crs: object) -> str:
 def _run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from demtrack.core.terrain.crs_import import local_crs_wkt, points_to_local, read_raster_to_local
     from demtrack.core.geo.geodesy import as_crs
     from demtrack.core.site.folder import load_site
     from demtrack.core.site.update import write_dem_atomic
+    from demtrack.core.terrain.crs_import import (
+        local_crs_wkt,
+        points_to_local,
+        read_raster_to_local,
+    )
     from demtrack.core.terrain.dem import VERTICAL_DATUM_LOCAL, Dem
     from demtrack.core.terrain.pointcloud import read_point_cloud
 

@@ -12,25 +12,7 @@ from .common import add_site_argument
 if TYPE_CHECKING:
     from demtrack.core.geolocation.geolocate import Geolocation, GroundHit
 
-__all__ = ["geolocation_to_dict", "print_geolocation", "register"]
-
-
-def geolocation_to_dict(sensor_id: str, g: Geolocation) -> dict:
-    """JSON-ready answer for one pixel."""
-    return {
-        "sensor": sensor_id,
-        "pixel": [g.u, g.v],
-        "rule": g.rule,
-        "status": g.status,
-        "crossed_nodata": g.crossed_nodata,
-        "ray": {
-            "origin_enu": [float(x) for x in g.origin_enu],
-            "direction_enu": [float(x) for x in g.direction_enu],
-        },
-        "selected": [h.to_dict() for h in g.selected],
-        "hits": [h.to_dict() for h in g.hits],
-        "road": g.road.to_dict() if g.road is not None else None,
-    }
+__all__ = ["print_geolocation", "register"]
 
 
 def _hit_line(tag: str, h: GroundHit) -> str:
@@ -57,6 +39,7 @@ def print_geolocation(g: Geolocation) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from demtrack.core.geolocation.geolocation_json import geolocation_to_dict
     from demtrack.core.site.folder import load_site
 
     site = load_site(args.site)

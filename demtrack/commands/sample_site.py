@@ -115,7 +115,7 @@ def _live(args: argparse.Namespace) -> int:
     # Cold start: the light kernels the build and the first page need compile in a child
     # beside the scan and the server imports; a second child, at the lowest CPU priority,
     # compiles the fast kernels, and the server's warm-up waits for it before it loads
-    # them and casts switch over (core.raycast.cast.use_light_kernels); two more, at a low
+    # them and casts switch over (core.raycast.light.use_light_kernels); two more, at a low
     # priority too, compile the live tracker's kernels, and the replay waits for them.
     warmers = KernelWarmers.start()
     server_warmer = KernelWarmers.start(["fusion", "kalman", "server"])
@@ -129,7 +129,7 @@ def _live(args: argparse.Namespace) -> int:
 
 
 def _use_light_kernels() -> None:
-    from demtrack.core.raycast.cast import use_light_kernels
+    from demtrack.core.raycast.light import use_light_kernels
 
     use_light_kernels(True)
 
@@ -161,6 +161,7 @@ def _serve_demo(
     server_warmer: Any,
 ) -> int:
     from demtrack.samplesite.kernel_warmup import TRACKER_JOBS
+    from demtrack.samplesite.replay_source import SAMPLE_SCENARIOS
     from demtrack.server.app import create_app
     from demtrack.server.scene3d import display_host
 
@@ -173,7 +174,7 @@ def _serve_demo(
         "scene3d": not args.no_3d,
         **live,
     }
-    app = create_app(**overrides)
+    app = create_app(scenarios=SAMPLE_SCENARIOS, **overrides)
     if server_warmer is not None:
         app.state.warm_after = server_warmer.wait
         # The replay starts once the tracker's kernels are in numba's cache: on a cold

@@ -9,6 +9,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from demtrack.server.gc_tuning import SERVER_GC_THRESHOLDS, tune_gc_for_serving
+
 from .choices import SCENARIO_NAMES
 from .common import DEFAULT_SITE
 
@@ -21,27 +23,6 @@ __all__ = [
     "serve_app",
     "tune_gc_for_serving",
 ]
-
-
-#: Cyclic-GC thresholds for the long-running server (CPython's default: 700, 10, 10).
-SERVER_GC_THRESHOLDS = (10_000, 20, 100)
-
-
-def tune_gc_for_serving() -> None:
-    """Make the cyclic garbage collector cheap for a long-lived server's large heap.
-
-    The server holds many long-lived objects (tracks, their points and JSON, the reorder
-    buffer); with CPython's default thresholds the full collections that walk all of them
-    came often enough that CPU per detection more than doubled after three minutes of a
-    20-track replay (1.4 -> 3.6 ms in-process; 1.5 ms with the collector off). Objects
-    alive once start-up is done are frozen (never scanned again) and the thresholds
-    raised: young garbage is still collected, full collections are rare. Memory freed
-    by reference counting (nearly all of it here) is unaffected.
-    """
-    import gc
-
-    gc.freeze()
-    gc.set_threshold(*SERVER_GC_THRESHOLDS)
 
 
 def serve_app(
@@ -162,6 +143,7 @@ def live_overrides(args: argparse.Namespace, replay_default: list[str]) -> dict[
 
 
 def _run(args: argparse.Namespace) -> int:
+    from demtrack.samplesite.replay_source import SAMPLE_SCENARIOS
     from demtrack.server.app import create_app
 
     overrides: dict[str, Any] = {}
@@ -177,7 +159,7 @@ def _run(args: argparse.Namespace) -> int:
         overrides.update(live_overrides(args, []))
     if args.scene3d:
         overrides.update(scene3d=True, viser_host=args.host, viser_port=args.viser_port)
-    app = create_app(**overrides)
+    app = create_app(scenarios=SAMPLE_SCENARIOS, **overrides)  # --replay plays the sample's
     settings = app.state.settings
     print_token(app)
     print(f"site {settings.site}, database {settings.resolved_db_path}", flush=True)

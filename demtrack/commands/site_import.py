@@ -42,7 +42,6 @@ def _geoid(args: argparse.Namespace, doc: dict | None) -> float:
 
 
 def _run_import_dem(args: argparse.Namespace) -> int:
-    from demtrack.core.terrain.crs_import import local_crs_wkt
     from demtrack.core.geo.geodesy import LocalFrame
     from demtrack.core.site.folder import MANIFEST, load_site
     from demtrack.core.site.update import (
@@ -51,6 +50,7 @@ def _run_import_dem(args: argparse.Namespace) -> int:
         write_dem_atomic,
         write_manifest,
     )
+    from demtrack.core.terrain.crs_import import local_crs_wkt
     from demtrack.core.terrain.dem_import import (
         footprint_bounds_local,
         grid_over,
@@ -142,11 +142,11 @@ def _run_import_dem(args: argparse.Namespace) -> int:
 
 
 def _run_import_ortho(args: argparse.Namespace) -> int:
-    from demtrack.core.terrain.crs_import import local_crs_wkt
     from demtrack.core.site.folder import load_site
     from demtrack.core.site.ortho_import import import_orthophoto
     from demtrack.core.site.orthophoto import write_orthophoto
     from demtrack.core.site.update import read_manifest, write_atomic, write_manifest
+    from demtrack.core.terrain.crs_import import local_crs_wkt
     from demtrack.core.terrain.dem_import import native_cell_m, read_raster_info
     from demtrack.core.terrain.grid import GridSpec
 

@@ -25,14 +25,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from demtrack.core.activity.detectors import (
-    ActivityEvent,
-    Zone,
-    detect_convoys,
-    detect_loitering,
-    detect_rendezvous,
-    detect_zone_crossings,
-)
+from demtrack.core.activity.convoy import detect_convoys
+from demtrack.core.activity.detectors import ActivityEvent
+from demtrack.core.activity.loitering import detect_loitering
+from demtrack.core.activity.rendezvous import detect_rendezvous
+from demtrack.core.activity.zones import Zone, detect_zone_crossings
 from demtrack.core.geolocation.fix_builder import build_fixes
 from demtrack.core.site.folder import Site
 from demtrack.core.tracking import run_tracker

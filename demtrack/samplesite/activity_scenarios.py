@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from demtrack.core.activity.detectors import Zone
+from demtrack.core.activity.zones import Zone
 from demtrack.core.errors import SiteError
 from demtrack.core.site.folder import Site
 from demtrack.core.tracking.types import TruthPath

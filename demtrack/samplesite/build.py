@@ -21,14 +21,15 @@ from PIL import Image
 
 from demtrack.core.camera.pantilt import wrap_deg
 from demtrack.core.errors import SiteError
-from demtrack.core.terrain.crs_import import local_crs_wkt
 from demtrack.core.geo.geodesy import LocalFrame
 from demtrack.core.geolocation.roads import RoadNetwork
-from demtrack.core.raycast.cast import light_kernels
+from demtrack.core.raycast.cast import RayCaster
+from demtrack.core.raycast.light import light_kernels
 from demtrack.core.site.folder import MANIFEST, Sensor, site_manifest
 from demtrack.core.site.orthophoto import write_orthophoto
 from demtrack.core.site.render import render_view
 from demtrack.core.site.road_io import write_roads_geojson
+from demtrack.core.terrain.crs_import import local_crs_wkt
 from demtrack.core.terrain.dem import Dem
 
 from .cameras import sighting_heads
@@ -60,7 +61,7 @@ def build_sample_site(
     child processes compiling the ray-casting kernels into numba's cache while the scan,
     DEM and orthophoto are made; the camera views are rendered once they are done (they
     are stopped if the build fails first), with the light kernels
-    (:func:`~demtrack.core.raycast.cast.use_light_kernels`).
+    (:func:`~demtrack.core.raycast.light.use_light_kernels`).
     """
     out = Path(out_dir)
     if out.exists() and any(out.iterdir()) and not (out / MANIFEST).exists():
@@ -133,7 +134,7 @@ def _build(
     # Two cameras at a time: the light kernels release the GIL. Same pixels as the fast
     # kernels, which take three times as long to compile (a cold start's render).
     with light_kernels(), ThreadPoolExecutor(2) as pool:
-        dem.ray_caster()  # the pyramid (in numpy), once, before the threads share it
+        RayCaster.for_dem(dem)  # the pyramid (in numpy), once, before the threads share it
         for spec, head, cal, sensor in pool.map(view, sighting_heads(world)):
             sensors.append(sensor)
             truth[spec.id] = {

@@ -21,11 +21,11 @@ the build meanwhile scans the world and grids the DEM and orthophoto, then waits
     all-hits re-walk, the pyramid, the run detector); started with ``cast`` at the lowest
     CPU priority, so it takes only the CPU the build and the server's start leave.
 ``tracker``
-    The live tracker's fusion and Kalman kernels (``core.tracking.warm``: about 16 s of CPU
+    The live tracker's fusion and Kalman kernels (``core.warm.warm_tracking``: about 16 s of CPU
     cold, about 1 s from the cache). A warm ``demtrack demo`` starts it with ``server``.
 ``kalman``
     The Kalman kernels alone (prediction, gating, update, smoothing: the walk of
-    ``core.tracking.warm`` seen by one camera; about 10 s of CPU cold).
+    ``core.warm.warm_tracking`` seen by one camera; about 10 s of CPU cold).
 ``fusion``
     The two-camera fusion kernels alone (the walk's first step: about 5 s). With
     ``kalman``, exactly what ``tracker`` compiles, in two processes so that two cores can
@@ -86,7 +86,7 @@ def _tiny_scene() -> tuple[Any, np.ndarray, Any, Any]:
 
 
 def _job_cast() -> None:
-    from demtrack.core.raycast.cast import light_kernels
+    from demtrack.core.raycast.light import light_kernels
     from demtrack.core.site.render import render_view
 
     dem, ortho, ortho_grid, camera = _tiny_scene()
@@ -102,19 +102,17 @@ def _job_pyramid() -> None:
 
 
 def _job_server() -> None:
-    import numpy as np
+    from demtrack.core.warm import warm_up
 
-    from demtrack.core.camera.pinhole import undistort_normalized_nb
-    from demtrack.core.raycast.cast import warm_up
-
-    warm_up(angular=False)  # what server.app warms at start-up, angular index excluded
-    undistort_normalized_nb(np.array([0.1]), np.array([0.1]), -0.04, 0.0, 0.0, 0.0, 0.0)
+    # What server.app warms at start-up but the tracker (its own jobs): no angular index.
+    warm_up(("raycast", "lens"), angular=False)
 
 
 def _job_tracker(part: str = "all") -> None:
-    from demtrack.core.tracking.warm import warm_up
+    from demtrack.core.warm import warm_up
 
-    warm_up(part=part)  # the whole walk, or one of its shares (core.tracking.warm.PARTS)
+    # The whole walk, or one of its shares (core.warm.TRACKING_PARTS).
+    warm_up(("tracking",), tracker_part=part)
 
 
 _JOB_FUNCS: dict[str, Callable[[], None]] = {

@@ -7,7 +7,7 @@ import json
 import numpy as np
 
 from demtrack.cli import main
-from demtrack.core.activity.detectors import Zone, detect_zone_crossings
+from demtrack.core.activity.zones import Zone, detect_zone_crossings
 from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import read_truth_json
 

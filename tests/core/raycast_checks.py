@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from demtrack.core.raycast.cast import RayHits
+from demtrack.core.raycast.hits import RayHits
 
 #: Every per-ray and per-hit array of a :class:`RayHits`.
 HIT_FIELDS = ("offsets", "range_m", "points", "status", "crossed_nodata", "truncated")

@@ -6,16 +6,10 @@ import numpy as np
 import pytest
 import shapely
 
-from demtrack.core.activity.detectors import (
-    ConvoyParams,
-    LoiterParams,
-    RendezvousParams,
-    Zone,
-    detect_convoys,
-    detect_loitering,
-    detect_rendezvous,
-    detect_zone_crossings,
-)
+from demtrack.core.activity.convoy import ConvoyParams, detect_convoys
+from demtrack.core.activity.loitering import LoiterParams, detect_loitering
+from demtrack.core.activity.rendezvous import RendezvousParams, detect_rendezvous
+from demtrack.core.activity.zones import Zone, detect_zone_crossings
 
 
 @dataclass

@@ -9,7 +9,9 @@ import pytest
 import shapely
 from test_activity_reference import Path, random_scene
 
-from demtrack.core.activity.detectors import _Drive, _ever_close, _project, _resample
+from demtrack.core.activity.convoy import _Drive, _project
+from demtrack.core.activity.detectors import _resample
+from demtrack.core.activity.rendezvous import _ever_close
 
 
 def _scene(seed: int) -> list[Path]:

@@ -8,20 +8,15 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from demtrack.core.activity.detectors import (
-    ActivityEvent,
-    ConvoyParams,
-    LoiterParams,
-    RendezvousParams,
-    detect_convoys,
-    detect_loitering,
-    detect_rendezvous,
-)
+from demtrack.core.activity.convoy import ConvoyParams, detect_convoys
+from demtrack.core.activity.detectors import ActivityEvent
+from demtrack.core.activity.loitering import LoiterParams, detect_loitering
 from demtrack.core.activity.reference import (
     detect_convoys_reference,
     detect_loitering_reference,
     detect_rendezvous_reference,
 )
+from demtrack.core.activity.rendezvous import RendezvousParams, detect_rendezvous
 from demtrack.samplesite.activity_scenarios import ACTIVITY_CASES, truth_paths
 from demtrack.samplesite.world import make_world
 
@@ -210,7 +205,7 @@ def test_convoy_of_tracks_with_repeated_times_needs_no_division_by_zero():
 def test_running_median_matches_one_window_at_a_time():
     """The lag's running median (``lag_window_s`` either side), vectorised, against a loop,
     on irregular times with repeats (fused tracks) and windows cut at the ends."""
-    from demtrack.core.activity.detectors import _running_median
+    from demtrack.core.activity.convoy import _running_median
 
     rng = np.random.default_rng(5)
     t = np.sort(np.round(rng.uniform(0, 20, 120), 1))  # rounding repeats some times

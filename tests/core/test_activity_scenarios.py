@@ -5,15 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from demtrack.core.activity.detectors import (
-    ActivityEvent,
-    ConvoyParams,
-    LoiterParams,
-    RendezvousParams,
-    detect_convoys,
-    detect_loitering,
-    detect_rendezvous,
-)
+from demtrack.core.activity.convoy import ConvoyParams, detect_convoys
+from demtrack.core.activity.detectors import ActivityEvent
+from demtrack.core.activity.loitering import LoiterParams, detect_loitering
+from demtrack.core.activity.rendezvous import RendezvousParams, detect_rendezvous
 from demtrack.core.site.folder import load_site
 from demtrack.samplesite.activity_eval import (
     DETECTORS,

@@ -7,7 +7,7 @@ import threading
 import numpy as np
 import pytest
 
-from demtrack.core.raycast.cast import fresh_memory
+from demtrack.core.raycast import fresh_memory
 from demtrack.core.raycast.fresh_memory import without_huge_page_advice
 
 

@@ -13,7 +13,7 @@ from demtrack.core.geolocation.fix_builder import build_fixes
 from demtrack.core.geolocation.geolocate import RULES
 from demtrack.core.geolocation.roads import RoadNetwork
 from demtrack.core.geolocation.uncertainty import hit_covariance, hit_covariances
-from demtrack.core.raycast.cast import cast as raycast_mod
+from demtrack.core.raycast import cast as raycast_mod
 from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import make_scenario
 

@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from scipy.optimize import brentq
 
 from demtrack.core.errors import DemError, DemtrackError, RaycastError
+from demtrack.core.raycast import _walk_kernels as kernels
 from demtrack.core.raycast.cast import (
     BELOW_GROUND,
     HIT,
@@ -21,13 +22,12 @@ from demtrack.core.raycast.cast import (
     RayHits,
     RayStatus,
     cast_rays,
-    warm_up,
 )
-from demtrack.core.raycast.cast import _kernels as kernels
 from demtrack.core.raycast.pyramid import build_pyramid
 from demtrack.core.raycast.reference import cast_rays_reference, pyramid_reference
 from demtrack.core.terrain.grid import GridSpec
 from demtrack.core.terrain.surface import bilinear_sample
+from demtrack.core.warm import warm_raycast as warm_up
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from demtrack.core.errors import RaycastError
+from demtrack.core.raycast import _angular_kernels as ak
 from demtrack.core.raycast.angular_index import (
     AngularCache,
     _cone,
@@ -24,7 +25,6 @@ from demtrack.core.raycast.cast import (
     RayCaster,
     RayHits,
 )
-from demtrack.core.raycast.cast import _angular_kernels as ak
 from demtrack.core.raycast.reference import (
     angular_leaves_reference,
     cast_rays_reference,
@@ -407,7 +407,7 @@ def test_set_up_lanes_match_the_scalar_set_up_to_the_bit(where):
     """A run's vectorised set-up (``_set_up_lanes``) gives every ray the scalar
     ``_prepare`` + ``_store_lane`` answers, bit for bit, on awkward rays: axis-aligned,
     level, vertical, tiny components, zero and finite ranges, origins off the DEM."""
-    from demtrack.core.raycast._kernels import BLOCK, HIT, SCRATCH_ROWS, _prepare
+    from demtrack.core.raycast._walk_kernels import BLOCK, HIT, SCRATCH_ROWS, _prepare
 
     rng = np.random.default_rng(11)
     dem = random_dem(rng, holes=False, nrows=17, ncols=23)

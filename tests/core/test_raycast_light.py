@@ -8,17 +8,12 @@ import numpy as np
 import pytest
 from raycast_checks import assert_identical_hits
 
-from demtrack.core.raycast.cast import (
-    RayCaster,
-    cast_rays,
-    light_kernels,
-    light_kernels_on,
-    use_light_kernels,
-    warm_up,
-)
-from demtrack.core.raycast.cast import cast as raycast
+from demtrack.core.raycast import cast as raycast
+from demtrack.core.raycast.cast import RayCaster, cast_rays
+from demtrack.core.raycast.light import light_kernels, light_kernels_on, use_light_kernels
 from demtrack.core.raycast.reference import cast_rays_reference
 from demtrack.core.terrain.grid import GridSpec
+from demtrack.core.warm import warm_raycast as warm_up
 
 
 @dataclass(frozen=True)

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from raycast_checks import assert_identical_hits
 
+from demtrack.core.raycast import _ray_kernels as kernels
+from demtrack.core.raycast import cast as raycast
 from demtrack.core.raycast.cast import RayCaster
-from demtrack.core.raycast.cast import _kernels as kernels
-from demtrack.core.raycast.cast import cast as raycast
 from demtrack.core.terrain.grid import GridSpec
 
 

@@ -12,8 +12,10 @@ import pytest
 from raycast_checks import HIT_FIELDS, assert_identical_hits
 
 from demtrack.bench.synthetic_terrain import camera_rays, incoherent_rays, synthetic_dem
-from demtrack.core.raycast.cast import RayCaster, RayHits, light_kernels
-from demtrack.core.raycast.cast import cast as rc
+from demtrack.core.raycast import scratch as rc
+from demtrack.core.raycast.cast import RayCaster
+from demtrack.core.raycast.hits import RayHits
+from demtrack.core.raycast.light import light_kernels
 
 
 @pytest.fixture(scope="module")

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from demtrack.core.raycast.cast import _angular_kernels as ak
-from demtrack.core.raycast.cast import _kernels as rk
+from demtrack.core.raycast import _angular_kernels as ak
+from demtrack.core.raycast import _ray_kernels as rk
 
 SHARES = (1, 2, 3, 7)
 

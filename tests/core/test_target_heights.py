@@ -10,7 +10,7 @@ from demtrack.core.visibility.target_heights import (
     target_height_for,
 )
 from demtrack.core.visibility.viewshed import viewshed
-from demtrack.server.routers import visibility as visibility_router
+from demtrack.server.api import visibility as visibility_router
 
 
 def test_classes_and_default():

@@ -16,9 +16,13 @@ PROBE = r"""
 import json, sys
 import numpy as np
 from numba.core.dispatcher import Dispatcher
-from demtrack.core import (
-    angular_kernels, camera, raycast, raycast_kernels, raycast_light_kernels, viewshed_kernels
+from demtrack.core.camera import _lens_kernels, lens
+from demtrack.core.raycast import (
+    _angular_index_kernels, _angular_kernels, _angular_walk_kernels, _hit_kernels, _kernels,
+    _light_kernels, _pyramid_kernels, _ray_kernels, _walk_kernels,
 )
+from demtrack.core.raycast import cast as raycast
+from demtrack.core.visibility import _viewshed_kernels
 from demtrack.core.terrain.dem import Dem
 from demtrack.core.terrain.grid import GridSpec
 from demtrack.core.site.folder import load_site
@@ -28,11 +32,19 @@ from demtrack.server.footprints import footprint
 
 def held():
     out = {}
-    mods = (angular_kernels, camera, raycast_kernels, raycast_light_kernels, viewshed_kernels)
-    for mod in mods:
-        for name, obj in vars(mod).items():
-            if isinstance(obj, Dispatcher):
-                out[f"{mod.__name__.rsplit('.', 1)[1]}.{name}"] = [str(s) for s in obj.signatures]
+    # The kernel modules under the names of the flat modules they were split from.
+    mods = {
+        "angular_kernels": (_angular_index_kernels, _angular_walk_kernels, _angular_kernels),
+        "camera": (lens, _lens_kernels),
+        "raycast_kernels": (_walk_kernels, _pyramid_kernels, _kernels, _hit_kernels, _ray_kernels),
+        "raycast_light_kernels": (_light_kernels,),
+        "viewshed_kernels": (_viewshed_kernels,),
+    }
+    for label, group in mods.items():
+        for mod in group:
+            for name, obj in vars(mod).items():
+                if isinstance(obj, Dispatcher):
+                    out[f"{label}.{name}"] = [str(s) for s in obj.signatures]
     return out
 
 steps = {"start": held(), "stopped": False}
@@ -194,7 +206,7 @@ TRACKER_PROBE = r"""
 import json
 from numba.core.dispatcher import Dispatcher
 from demtrack.core.tracking import fusion_kernels, hypothesiser_kernels, kalman_kernels
-from demtrack.core.tracking.warm import warm_up
+from demtrack.core.warm import warm_tracking as warm_up
 from demtrack.samplesite.kernel_warmup import run_job
 
 def held():

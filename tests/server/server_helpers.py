@@ -7,7 +7,9 @@ from typing import Any
 
 import numpy as np
 
+from demtrack.samplesite.replay_source import SAMPLE_SCENARIOS
 from demtrack.server.app import create_app
+from demtrack.server.replay import scenario_stream as _scenario_stream
 
 TOKEN = "test-operator-token"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
@@ -21,7 +23,12 @@ def make_app(site: Path, tmp: Path, **overrides: Any):
         "warm_up": False,
     }
     kw.update(overrides)
-    return create_app(**kw)
+    return create_app(scenarios=SAMPLE_SCENARIOS, **kw)
+
+
+def scenario_stream(site, names, t0_s: float, **kw: Any):
+    """:func:`demtrack.server.replay.scenario_stream` of the sample site's scenarios."""
+    return _scenario_stream(site, names, t0_s, source=SAMPLE_SCENARIOS, **kw)
 
 
 def walk(
@@ -58,8 +65,8 @@ def vehicle_run_pipeline(site_dir: Path, tmp: Path, until_s: float):
     """
     from demtrack.core.site.folder import load_site
     from demtrack.samplesite.scenarios import make_scenario
-    from demtrack.server.db import Store
-    from demtrack.server.pipeline import Pipeline
+    from demtrack.server.store.database import Store
+    from demtrack.server.ingest.pipeline import Pipeline
 
     site = load_site(site_dir)
     records = [

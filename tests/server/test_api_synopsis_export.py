@@ -18,7 +18,7 @@ from server_helpers import AUTH, make_app, post_in_time_batches
 from demtrack.core.io.track_io import GPX_NS, KML_NS
 from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import make_scenario
-from demtrack.server.routers.synopsis import synopsis, trajectory
+from demtrack.server.synopsis import synopsis, trajectory
 
 pytestmark = pytest.mark.timeout(600)
 

@@ -119,7 +119,7 @@ def test_walking_object_becomes_a_track_with_filters(client):
 
 def test_one_track_by_id_is_the_listed_body(client):
     """``Store.track`` (one row by key) gives exactly the body ``Store.tracks`` lists."""
-    from demtrack.server.db import dumps_json, loads_json
+    from demtrack.server.store.codec import dumps_json, loads_json
 
     post(client, walk(n=30, t0=0.0))
     post(client, walk(sensor="cam2", n=30, t0=100.0, u0=300, v=600, cls="human"))

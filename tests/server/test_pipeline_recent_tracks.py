@@ -14,12 +14,12 @@ import math
 from pathlib import Path
 
 import pytest
+from server_helpers import scenario_stream
 
 from demtrack.core.site.folder import load_site
-from demtrack.server.db import Store
+from demtrack.server.store.database import Store
 from demtrack.server.live_events import LiveEventParams
-from demtrack.server.pipeline import Pipeline
-from demtrack.server.replay import scenario_stream
+from demtrack.server.ingest.pipeline import Pipeline
 
 pytestmark = pytest.mark.timeout(600)
 

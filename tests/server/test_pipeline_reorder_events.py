@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 from server_helpers import walk
 
-from demtrack.core.activity.detectors import LoiterParams
+from demtrack.core.activity.loitering import LoiterParams
 from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import make_scenario
-from demtrack.server.db import Store
+from demtrack.server.store.database import Store
 from demtrack.server.live_events import LiveEventParams
-from demtrack.server.pipeline import Pipeline
+from demtrack.server.ingest.pipeline import Pipeline
 
 pytestmark = pytest.mark.timeout(600)
 

@@ -5,11 +5,11 @@ from __future__ import annotations
 import itertools
 
 import pytest
-from server_helpers import make_app
+from server_helpers import make_app, scenario_stream
 
 from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import ScenarioParams, make_scenario
-from demtrack.server.replay import LOOP_GAP_S, scenario_frames, scenario_stream
+from demtrack.server.replay import LOOP_GAP_S, scenario_frames
 
 pytestmark = pytest.mark.timeout(300)
 

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from server_helpers import scenario_stream
 
 from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import ScenarioParams, make_scenario
-from demtrack.server.replay import LOOP_GAP_S, scenario_stream
+from demtrack.server.replay import LOOP_GAP_S
 from demtrack.server.replay_schedule import commensurate_periods, replay_schedule
 
 pytestmark = pytest.mark.timeout(300)

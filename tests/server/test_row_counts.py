@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from demtrack.core.tracking.types import Detection
-from demtrack.server import db
+from demtrack.server.store import database as db
 
 
 def _true_counts(store: db.Store) -> dict[str, int]:

@@ -15,7 +15,6 @@ from scipy.spatial.transform import Rotation
 from demtrack.core.site.folder import load_site
 from demtrack.core.terrain.dem import Dem
 from demtrack.core.terrain.grid import GridSpec
-from demtrack.server import scene3d
 from demtrack.server.messages import FixMessage, TrackUpdateMessage
 from demtrack.server.scene3d import (
     Scene3D,
@@ -30,6 +29,8 @@ from demtrack.server.scene3d import (
     track_colour,
     wxyz_from_matrix,
 )
+from demtrack.server.scene3d import following as scene_following
+from demtrack.server.scene3d import tracks as scene_tracks
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -233,9 +234,9 @@ def track_segments(scene, tid):
 def test_long_track_is_drawn_in_pieces_and_updates_redraw_only_its_end(scene, monkeypatch):
     """A long track's polyline is the same drawn in pieces; an update at the end
     re-sends only the piece(s) its changed points touch; a restyle re-sends every one."""
-    import demtrack.server.scene3d as s3
+    from demtrack.server.scene3d import geometry as s3
 
-    monkeypatch.setattr(s3, "_PIECE_SEGMENTS", 4)
+    monkeypatch.setattr(scene_tracks, "_PIECE_SEGMENTS", 4)
     walk = [(float(k), 0.5 * k, 1.0 + 0.01 * k, 1000 + k) for k in range(11)]
     scene.publish([track_message(1, walk)])
     assert scene.flush()
@@ -522,7 +523,7 @@ def test_a_client_back_at_the_starting_view_is_aimed_again(scene, monkeypatch):
     A slow page's viser client can reset its camera to the server's initial view after it
     settled on the followed track, or after the settling time; an operator's pan is kept.
     """
-    monkeypatch.setattr(scene3d, "_SETTLE_S", 0.3)
+    monkeypatch.setattr(scene_following, "_SETTLE_S", 0.3)
     lift = np.array([0.0, 0.0, 0.4])
     session = "home-0123456789"
     walk = [(-20.0, 10.0 + 4.0 * k, 2.0) for k in range(5)]

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from demtrack.server import db
+from demtrack.server.store import database as db
 from demtrack.server.messages import SCHEMA_PATH, messages_schema, schema_text
 
 ROOT = Path(__file__).resolve().parents[2]

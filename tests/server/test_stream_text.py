@@ -12,7 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from demtrack.core.tracking.types import Detection
-from demtrack.server.db import Store, dumps_json, published_text
+from demtrack.server.store.codec import dumps_json, published_text
+from demtrack.server.store.database import Store
 from demtrack.server.hub import Hub, StreamMessage, encoded
 
 _scalars = st.one_of(

@@ -15,18 +15,19 @@ from server_helpers import AUTH, make_app, walk
 
 from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import make_scenario
-from demtrack.server import db
-from demtrack.server.db import Store, loads_json
+from demtrack.server import store as db
+from demtrack.server.store.codec import loads_json
+from demtrack.server.store.database import Store
 from demtrack.server.models import TracksOut
-from demtrack.server.pipeline import Pipeline
-from demtrack.server.routers.synopsis import (
-    SynopsisOut,
+from demtrack.server.ingest.pipeline import Pipeline
+from demtrack.server.synopsis import (
     assemble,
     trajectory,
     trajectory_reference,
 )
-from demtrack.server.routers.tracks import track_cache
+from demtrack.server.synopsis_models import SynopsisOut
 from demtrack.server.track_cache import TrackCache
+from demtrack.server.track_query import track_cache
 
 pytestmark = pytest.mark.timeout(900)
 

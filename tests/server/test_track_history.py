@@ -12,7 +12,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from demtrack.server.db import Store, TrackTail, dumps_json
+from demtrack.server.store.codec import dumps_json
+from demtrack.server.store.database import Store
+from demtrack.server.store.queries import TrackTail
 from demtrack.server.track_cache import TrackCache
 from demtrack.server.track_history import PointCuts
 

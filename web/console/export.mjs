@@ -5,7 +5,7 @@
 // with heights above the ellipsoid. Times are session seconds (t_s): no wall-clock epoch
 // is known to the console, so GPX <time> is left out and t_s goes into each point's <desc>.
 
-import { escapeXml } from "./util.mjs";
+import { download, escapeXml } from "./util.mjs";
 
 function trackProps(t) {
   const pts = t.points;
@@ -140,4 +140,16 @@ export function renderMarkers(format, markers) {
   if (format === "gpx") return markersGPX(markers);
   if (format === "kml") return markersKML(markers);
   throw new Error(`unknown format ${format}`);
+}
+
+/** Saves the tracks as a file in the format (`demtrack-tracks.<ext>`). */
+export function downloadTracks(format, tracks) {
+  const f = FORMATS[format];
+  download(`demtrack-tracks.${f.ext}`, f.mime, renderTracks(format, tracks));
+}
+
+/** Saves the markers as a file in the format (`demtrack-markers.<ext>`). */
+export function downloadMarkers(format, markers) {
+  const f = FORMATS[format];
+  download(`demtrack-markers.${f.ext}`, f.mime, renderMarkers(format, markers));
 }

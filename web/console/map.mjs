@@ -5,16 +5,10 @@
 // tracks, geolocation hits, markers) is drawn from site-frame coordinates directly.
 
 /* global ol */
-import { classColour, HIT_COLOUR, SELECTED_COLOUR } from "./util.mjs";
+import { eventColour, KIND } from "./events.mjs";
 import { lastIndexAtOrBefore, positionAt } from "./store.mjs";
+import { classColour, HIT_COLOUR, SELECTED_COLOUR } from "./util.mjs";
 
-const EVENT_COLOURS = {
-  track_confirmed: "#70ff70",
-  track_ended: "#ff5050",
-  handoff: "#5aa0ff",
-  "zone-enter": "#ffffff",
-  "zone-leave": "#ffffff",
-};
 const TRAIL_S = 30; // seconds of trail behind each live position
 const HOLD_LIVE_S = 10;
 const HOLD_ENDED_S = 2;
@@ -376,8 +370,8 @@ export class SiteMap {
 
   eventStyle(f) {
     const kind = f.get("kind");
-    const colour = EVENT_COLOURS[kind] || "#b07cff";
-    const ended = kind === "track_ended";
+    const colour = eventColour(kind);
+    const ended = kind === KIND.TRACK_ENDED;
     return new ol.style.Style({
       image: new ol.style.RegularShape({
         points: ended ? 4 : 5,

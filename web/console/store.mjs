@@ -168,7 +168,7 @@ export class Store {
     this.version += 1;
   }
 
-  /** A normalised event (see main.mjs `normEvent`); an episode's later states replace it. */
+  /** A normalised event (events.mjs `normEvent`); an episode's later states replace it. */
   applyEvent(ev) {
     const k = ev.key ? this.events.findIndex((e) => e.key === ev.key) : -1;
     if (k >= 0) {

@@ -8,7 +8,7 @@ from test_tracking_batched import _fix
 
 from demtrack.core.tracking import fusion_kernels, hypothesiser_kernels, kalman_kernels
 from demtrack.core.tracking.methods import run_tracker
-from demtrack.core.tracking.warm import warm_up
+from demtrack.core.warm import warm_tracking as warm_up
 
 KERNELS = (
     fusion_kernels.screen_pairs_kernel,

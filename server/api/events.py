@@ -1,0 +1,58 @@
+"""``/api/events``: detected events (activity, hand-off predictions, track life cycle)."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from fastapi import APIRouter, Query
+from pydantic import BaseModel, ConfigDict
+
+from .. import listing
+from ..listing import EVENT_KINDS
+from ..messages import EventBody
+from .deps import StateDep, TimeFrom, TimeTo
+
+__all__ = ["EVENT_KINDS", "EventsOut", "router"]
+
+router = APIRouter(prefix="/api/events", tags=["events"])
+
+Kind = Literal[
+    "loitering",
+    "rendezvous",
+    "convoy",
+    "zone-enter",
+    "zone-leave",
+    "handoff",
+    "track_confirmed",
+    "track_ended",
+]
+
+
+_KIND = Query(None, description="only these kinds (repeat the parameter)")
+
+
+class EventsOut(BaseModel):
+    """Events overlapping the window, by start time."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    events: list[EventBody]
+
+
+@router.get("", response_model=EventsOut, summary="Detected events")
+def list_events(
+    state: StateDep,
+    t_from: TimeFrom = None,
+    t_to: TimeTo = None,
+    kind: list[Kind] | None = _KIND,
+    track: int | None = Query(None, ge=0, description="only events involving this track"),
+    open_only: bool = Query(False, alias="open", description="only episodes still going on"),
+    limit: int = Query(1000, ge=1, le=10_000),
+) -> dict[str, Any]:
+    """Stored events whose ``[t_start_s, t_end_s]`` overlaps the window.
+
+    Loitering, rendezvous and convoy episodes, zone entries and exits, hand-off
+    predictions (``t_end_s`` = predicted exit time) and tracks confirmed / ended.
+    """
+    rows = listing.list_events(state, t_from, t_to, kind, track, open_only, limit)
+    return {"events": rows}

@@ -1,0 +1,153 @@
+"""Fix bodies <-> tracker fixes: the one way a stored fix becomes the tracker's input.
+
+A fix's stored body (the ``fixes`` table, the ``fix`` stream message) is made here from
+the builder's :class:`~demtrack.core.tracking.types.Fix`, and the tracker's fix is made
+back from that body by :func:`fixes_from_bodies` - in the live run and in the start-up
+replay alike, through the one validating, vectorised constructor
+:meth:`Fix.from_arrays <demtrack.core.tracking.types.Fix.from_arrays>`. The body holds
+the fix's own floats (``tolist`` and JSON keep every bit), so a restart hands the tracker
+the very fixes the live run did: identical tracks by construction.
+
+Body hits hold their geodetic fields (``lat_deg``, ``lon_deg``, ``h_m``) in place but
+None when made: the pipeline fills them from the batch's one geodetic conversion.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from demtrack.core.tracking.types import Detection, Fix
+
+__all__ = ["fix_bodies", "fix_from_body", "fixes_from_bodies", "hit_body"]
+
+#: Placeholders for rows :meth:`Fix.from_arrays` does not read (no road point, no covariance).
+_NO_ROAD = [0.0, 0.0, 0.0]
+_NO_COV = [[1.0, 0.0], [0.0, 1.0]]
+
+
+def hit_body(p: list[float], sigma: float, cov: list[list[float]] | None = None) -> dict[str, Any]:
+    """A stored hit; its geodetic fields (None here, in their places) are filled later."""
+    hit: dict[str, Any] = {
+        "e_m": p[0],
+        "n_m": p[1],
+        "u_m": p[2],
+        "lat_deg": None,
+        "lon_deg": None,
+        "h_m": None,
+        "sigma_m": sigma,
+    }
+    if cov is not None:
+        hit["cov_en_m2"] = cov
+    return hit
+
+
+def fix_bodies(
+    pending: Sequence[tuple[int, Detection]], fixes: Sequence[Fix]
+) -> tuple[list[dict[str, Any] | None], list[tuple[np.ndarray, list[dict[str, Any]]]]]:
+    """The stored body of each detection's fix (None: no fix), geodetic fields unfilled.
+
+    ``fixes``: :func:`~demtrack.core.geolocation.fix_builder.build_fixes` of the
+    detections of ``pending`` (``detection_index`` = position in ``pending``). The second
+    value, ``[(points (k, 3), hit dicts)]`` (empty when there is no hit), is what fills
+    the hits' ``lat_deg``, ``lon_deg`` and ``h_m`` before the bodies are used.
+    """
+    by_index = {f.detection_index: f for f in fixes}
+    chunks = []
+    for f in fixes:
+        chunks.append(f.hits_enu)
+        if f.road_hit_enu is not None:
+            chunks.append(f.road_hit_enu[None, :])
+    dicts: list[dict[str, Any]] = []
+    out: list[dict[str, Any] | None] = []
+    for i, (det_id, d) in enumerate(pending):
+        fix = by_index.get(i)
+        if fix is None:
+            out.append(None)
+            continue
+        hits = []
+        covs = [None] * fix.n_hits if fix.hit_cov_en_m2 is None else fix.hit_cov_en_m2.tolist()
+        for p, sigma, cov in zip(
+            fix.hits_enu.tolist(), fix.hit_sigma_m.tolist(), covs, strict=True
+        ):
+            hits.append(hit_body(p, sigma, cov))
+        dicts += hits
+        road = None
+        if fix.road_hit_enu is not None:
+            sigma = float(np.min(fix.hit_sigma_m)) if len(fix.hit_sigma_m) else 1.0
+            road = hit_body(fix.road_hit_enu.tolist(), sigma)
+            dicts.append(road)
+        u0, _, u1, v1 = d.bbox
+        out.append(
+            {
+                "detection_id": det_id,
+                "t_s": d.t_s,
+                "sensor": d.sensor,
+                "cls": d.cls,
+                "score": d.score,
+                "bbox": list(d.bbox),
+                "foot_pixel": [0.5 * (u0 + u1), v1],
+                "origin_enu": fix.origin_enu.tolist(),
+                "direction_enu": fix.direction_enu.tolist(),
+                "hits": hits,
+                "road_hit": road,
+                "tracked": True,
+            }
+        )
+    return out, [(np.vstack(chunks), dicts)] if chunks else []
+
+
+def fixes_from_bodies(bodies: Sequence[dict[str, Any]]) -> list[Fix]:
+    """The tracker's :class:`Fix` of each stored fix body (``detection_index`` = detection id).
+
+    One call of :meth:`Fix.from_arrays` for all of them: validated once over the stacked
+    arrays, the direction normalised as the constructor does. A body stored before
+    covariances were kept has none (the tracker uses ``sigma_m``). A malformed body raises
+    the constructor's :class:`~demtrack.core.errors.TrackingError`, which names the problem.
+    """
+    t_s, sensor, cls, ids, score = [], [], [], [], []
+    origin, direction, road, has_road, has_cov = [], [], [], [], []
+    offsets, hits, sigma, cov = [0], [], [], []
+    for b in bodies:
+        t_s.append(b["t_s"])
+        sensor.append(b["sensor"])
+        cls.append(b["cls"])
+        ids.append(b["detection_id"])
+        score.append(b.get("score"))
+        origin.append(b["origin_enu"])
+        direction.append(b["direction_enu"])
+        r = b.get("road_hit")
+        road.append(_NO_ROAD if r is None else [r["e_m"], r["n_m"], r["u_m"]])
+        has_road.append(r is not None)
+        body_hits = b["hits"]
+        covs = [h.get("cov_en_m2") for h in body_hits]
+        with_cov = bool(covs) and all(c is not None for c in covs)
+        has_cov.append(with_cov)
+        for h, c in zip(body_hits, covs, strict=True):
+            hits.append([h["e_m"], h["n_m"], h["u_m"]])
+            sigma.append(h["sigma_m"])
+            cov.append(c if with_cov else _NO_COV)
+        offsets.append(len(sigma))
+    return Fix.from_arrays(
+        t_s,
+        sensor,
+        cls,
+        ids,
+        origin,
+        direction,
+        offsets,
+        hits,
+        sigma,
+        road_hit_enu=road,
+        has_road=has_road,
+        score=score,
+        hit_cov_en_m2=cov if any(has_cov) else None,
+        has_cov=has_cov,
+    )
+
+
+def fix_from_body(body: dict[str, Any]) -> Fix:
+    """The tracker's :class:`Fix` of one stored fix body (see :func:`fixes_from_bodies`)."""
+    return fixes_from_bodies([body])[0]

@@ -1,0 +1,385 @@
+"""The pipeline's coordinator: one batch through store, fixes, tracker, events and stream.
+
+One :class:`Pipeline` per server, called from worker threads; a lock serialises batches
+so detection ids, the tracker's input order and the stream's sequence numbers all follow
+arrival order (:mod:`.group_commit`). The tracker's input is always the fix *as stored*
+(:mod:`.fix_codec`), fed through the reorder buffer (:mod:`.reorder`,
+:mod:`.tracker_feed`), so replaying the stored fixes at start-up (:mod:`.replay_on_start`)
+rebuilds exactly the tracker state the live run had. After each batch
+:class:`~demtrack.server.live_events.LiveEvents` may run the activity detectors and
+hand-off prediction (every ``every_s`` of scenario time); its events are stored in the
+``activity`` table and streamed as ``event`` messages (:mod:`.events`). Each job lives in
+its own module; this one wires them together.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from demtrack.core.activity.convoy import ConvoyParams
+from demtrack.core.activity.kinds import EventKind
+from demtrack.core.activity.loitering import LoiterParams
+from demtrack.core.activity.rendezvous import RendezvousParams
+from demtrack.core.geolocation.fix_builder import build_fixes, sensor_sizes
+from demtrack.core.site.folder import Site
+from demtrack.core.site.zone_io import read_zones_geojson
+from demtrack.core.tracking import build_tracker
+from demtrack.core.tracking.types import Detection, Fix, Track
+
+from ..live_events import LiveEventParams, LiveEvents
+from ..store.database import Store
+from ..store.derived import FixRow
+from .events import event_message, ingest_message
+from .fix_codec import fix_bodies, fixes_from_bodies
+from .group_commit import Ack, GroupCommit, Request, commit_group
+from .publish import Publisher, sensor_status_messages, store_and_publish
+from .reorder import ReorderBuffer
+from .replay_on_start import load_stored_fixes
+from .stream_messages import EventPayload, FixPayload, StreamPayload
+from .track_bodies import Geodetic, TrackBodies
+from .tracker_feed import TrackerFeed
+from .validate import validate_records
+
+__all__ = ["Pipeline", "Publisher", "pipeline_options"]
+
+log = logging.getLogger("demtrack.server")
+
+
+def pipeline_options(settings: Any) -> dict[str, Any]:
+    """Keyword arguments of :class:`Pipeline` from the server settings.
+
+    Zones come from ``settings.zones_path`` or, when unset, ``<site>/zones.geojson`` if
+    that file exists (read in the site's frame).
+    """
+    return {
+        "reorder_lag_s": settings.reorder_lag_s,
+        "retain_ended_s": settings.track_retain_s,
+        "events": (
+            LiveEventParams(
+                every_s=settings.events_every_s,
+                window_s=settings.events_window_s,
+                sample_s=settings.events_sample_s,
+                loiter=LoiterParams(settings.loiter_radius_m, settings.loiter_min_s),
+                rendezvous=RendezvousParams(
+                    settings.rendezvous_distance_m,
+                    settings.rendezvous_stop_mps,
+                    settings.rendezvous_min_s,
+                ),
+                convoy=ConvoyParams(
+                    path_tolerance_m=settings.convoy_path_tolerance_m,
+                    max_lag_s=settings.convoy_max_lag_s,
+                    min_distance_m=settings.convoy_min_distance_m,
+                ),
+                handoff_horizon_s=settings.handoff_horizon_s,
+                handoff_dt_s=settings.handoff_dt_s,
+            )
+            if settings.events
+            else None
+        ),
+        "zones_path": settings.zones_path or settings.site / "zones.geojson",
+    }
+
+
+class Pipeline:
+    """The server's ingest and tracking state.
+
+    Parameters
+    ----------
+    site : Site
+    store : Store
+    method : str
+        Tracking method (a key of :data:`demtrack.core.tracking.METHODS`).
+    publish : callable
+        Receives each batch's stream messages, in sequence order.
+    reorder_lag_s : float
+        How far behind the newest fix a fix waits before it is tracked (s).
+    events : LiveEventParams or None
+        Live activity detection and hand-off prediction; None turns them off.
+    zones_path : path, optional
+        GeoJSON zones for enter/leave events (ignored when the file does not exist).
+    retain_ended_s : float
+        Forget ended tracks whose last fix is more than this far behind the newest
+        tracked one (s; at least the tracker's re-acquisition window and the live events'
+        window are kept). They stay in the store.
+    """
+
+    def __init__(
+        self,
+        site: Site,
+        store: Store,
+        method: str,
+        publish: Publisher,
+        *,
+        reorder_lag_s: float = 0.5,
+        events: LiveEventParams | None = None,
+        zones_path: Any = None,
+        retain_ended_s: float = 600.0,
+    ) -> None:
+        self.site = site
+        self.store = store
+        self.method = method
+        self.publish = publish
+        self.sizes = sensor_sizes(site)
+        self.reorder_lag_s = float(reorder_lag_s)
+        self.retain_ended_s = float(retain_ended_s)
+        if events is not None and zones_path is not None and Path(zones_path).is_file():
+            zones = tuple(read_zones_geojson(zones_path, site.frame))
+            events = LiveEventParams(**{**events.__dict__, "zones": zones})
+        self.event_params = events
+        self.live_events: LiveEvents | None = None
+        self.commits = GroupCommit()
+        self.buffer = ReorderBuffer(self.reorder_lag_s)
+        self.feed = TrackerFeed(build_tracker(method, roads=site.roads), self.buffer)
+        self.bodies = TrackBodies(site.frame)
+        #: Ingest transactions committed and the batches they held (group commit).
+        self.n_commits = 0
+        self.n_batches = 0
+        #: Fixes stored with ``tracked: false`` (they sorted before what was tracked).
+        self.n_late = 0
+        self._last_t: dict[str, float] = {}
+        self._n_det: dict[str, int] = {}
+
+    # ------------------------------------------------------------- components
+    @property
+    def tracker(self) -> Any:
+        """The online tracker (:func:`demtrack.core.tracking.build_tracker`)."""
+        return self.feed.tracker
+
+    @property
+    def n_buffered(self) -> int:
+        """Fixes waiting in the reorder buffer."""
+        return len(self.buffer)
+
+    @property
+    def keep_ended_s(self) -> float:
+        """How long (s) ended tracks stay in memory: the setting, or the events' window."""
+        window = self.event_params.window_s if self.event_params is not None else 0.0
+        return max(self.retain_ended_s, window)
+
+    # Internal state the tests and benchmarks read, kept where it always was.
+    @property
+    def _lock(self) -> Any:
+        return self.commits.lock
+
+    @property
+    def _waiting(self) -> list[Request]:
+        return self.commits.waiting
+
+    @property
+    def _queued_fixes(self) -> dict[int, Fix]:
+        return self.buffer.fixes
+
+    @property
+    def _points(self) -> dict[int, tuple[np.ndarray, list[dict[str, Any]], list[str]]]:
+        return self.bodies.points
+
+    @_points.setter
+    def _points(self, value: dict[int, tuple[np.ndarray, list[dict[str, Any]], list[str]]]) -> None:
+        self.bodies.points = value
+
+    # ---------------------------------------------------------------- start-up
+    def start(self) -> dict[str, int]:
+        """Rebuild the tracker from the stored fixes and finish interrupted work.
+
+        The stored ``tracked`` fixes are sorted by ``(t_s, sensor, detection_id)``; those at most
+        ``reorder_lag_s`` behind the newest go to the tracker, the rest back into the
+        reorder buffer. Detections stored but not yet processed (a crash between commit
+        and tracking) are processed now, and the tracks table is rewritten.
+
+        Returns counts: ``replayed`` fixes and ``processed`` detections.
+        """
+        with self._lock:
+            self._last_t = self.store.last_times()
+            self._n_det = self.store.sensor_counts()
+            load_stored_fixes(self.store, self.buffer)
+            dropped: set[int] = set()
+
+            def drop() -> list[int]:
+                ids = self._drop_ended()
+                dropped.update(ids)
+                return ids
+
+            replayed = self.feed.release(drop)
+            # Every track as the replay left it (the table may hold tracks of fixes whose
+            # batch was cut short); its messages were already sent before the restart.
+            # Tracks the replay forgot (ended long ago) keep their stored rows.
+            rows, _ = self._track_changes(self.tracker.tracks(), force=True)
+            self.store.write_derived([], rows, [], replace_tracks=True, keep_track_ids=dropped)
+            self.bodies.dirty_from.clear()
+            if self.event_params is not None:
+                known = self.store.activity(open_only=True) + self.store.latest_activity(
+                    EventKind.HANDOFF
+                )
+                self.live_events = LiveEvents(self.site, self.event_params, known)
+                if math.isfinite(self.feed.released_t):
+                    self.live_events.last_eval_t = self.feed.released_t
+            processed = 0
+            while True:
+                pending = self.store.detections(0, 5000, unprocessed=True)
+                if not pending:
+                    break
+                self._process(pending)
+                processed += len(pending)
+            return {"replayed": replayed, "processed": processed}
+
+    # ------------------------------------------------------------------ ingest
+    def _validate(self, records: Sequence[Any]) -> tuple[list[Detection], dict[str, Any]]:
+        """Check records with the detection-file rules (:mod:`.validate`)."""
+        return validate_records(records, self._last_t, self.sizes)
+
+    def ingest(self, records: Sequence[Any], batch_key: str | None = None) -> dict[str, Any]:
+        """Validate, store durably, then geolocate, track and publish one batch.
+
+        Returns the acknowledgement (the batch is committed when this returns): counts
+        ``accepted`` / ``skipped`` by reason, the first issues, the new detection ids.
+
+        Group commit: batches that arrive while another is being handled (several
+        cameras posting at once) wait together; the next one to get the lock commits all
+        of them in one transaction (one WAL sync) and processes them as one, in arrival
+        order - each keeps its own batch row, acknowledgement and ``ingest`` message.
+        """
+        return self.commits.submit(records, batch_key, self._ingest_group)
+
+    def _accept(self, req: Request) -> tuple[list[Detection], dict[str, Any]]:
+        """Validate one request after the batches before it and count its detections."""
+        dets, ack = self._validate(req.records)
+        for d in dets:
+            self._last_t[d.sensor] = max(d.t_s, self._last_t.get(d.sensor, d.t_s))
+            self._n_det[d.sensor] = self._n_det.get(d.sensor, 0) + 1
+        return dets, ack
+
+    def _ingest_group(self, group: list[Request]) -> None:
+        """Commit ``group``'s batches in one transaction, then process them (lock held)."""
+        last_t, n_det = dict(self._last_t), dict(self._n_det)
+        out = commit_group(self.store, group, self._accept)
+        if out is None:  # nothing committed: the counters are as before
+            self._last_t, self._n_det = last_t, n_det
+            return
+        self.n_commits += 1
+        self.n_batches += len(group)
+        pending, acks = out
+        if not acks:
+            return
+        try:
+            self._process(pending, acks=acks)
+        except Exception:  # the batches are durable; start-up replays what failed here
+            ids = ", ".join(str(a["batch_id"]) for a, _ in acks)
+            log.exception("processing batch(es) %s failed after commit", ids)
+
+    # -------------------------------------------------------------- processing
+    def _drop_ended(self) -> list[int]:
+        """Forget tracks that ended more than :attr:`keep_ended_s` ago; their ids."""
+        ids = self.feed.drop_ended(self.keep_ended_s)
+        self.bodies.forget(ids)
+        return ids
+
+    def _fix_bodies(
+        self, pending: list[tuple[int, Detection]], fixes: list[Fix]
+    ) -> tuple[list[dict[str, Any] | None], list[Geodetic]]:
+        """The stored bodies of ``pending``'s fixes (:func:`.fix_codec.fix_bodies`).
+
+        The tracker's fix of each body is made from the body (as the start-up replay
+        makes it) and waits in the reorder buffer's :attr:`~.ReorderBuffer.fixes`.
+        """
+        bodies, unfilled = fix_bodies(pending, fixes)
+        made = [b for b in bodies if b is not None]
+        self.buffer.fixes.update(
+            zip((b["detection_id"] for b in made), fixes_from_bodies(made), strict=True)
+        )
+        return bodies, unfilled
+
+    def _process(self, pending: list[tuple[int, Detection]], *, acks: Sequence[Ack] = ()) -> None:
+        """Geolocate, track, detect events, store and publish ``pending`` detections.
+
+        ``acks``: each ingested batch's acknowledgement and newest detection time, for
+        its ``ingest`` message.
+        """
+        dets = [d for _, d in pending]
+        fixes, _ = build_fixes(self.site, dets)
+        # The bodies' geodetic fields are filled by the track points' conversion below:
+        # one pyproj round trip per batch, not two.
+        bodies, unfilled = self._fix_bodies(pending, fixes)
+        fixed = {det_id for (det_id, _), body in zip(pending, bodies, strict=True) if body}
+        rows: list[FixRow] = []
+        events: list[tuple[str, StreamPayload]] = []
+        for (det_id, d), body in zip(pending, bodies, strict=True):
+            if body is None:
+                body = {"detection_id": det_id, "hits": None, "tracked": False}
+                rows.append((det_id, d.t_s, d.sensor, d.cls, "no_fix", body))
+                continue
+            if not self.buffer.admit((body["t_s"], body["sensor"], det_id)):
+                body["tracked"] = False
+                self.n_late += 1
+            rows.append((det_id, d.t_s, d.sensor, d.cls, "fix", body))
+            events.append(("fix", FixPayload(body)))
+        self.feed.release()
+        live_now = self.tracker.tracks(include_ended=False)
+        live_ids = {t.id for t in live_now}
+        ended_ids = self.bodies.live_ids - live_ids
+        changed = live_now
+        if ended_ids:  # rare: read the ended tracks' final form once
+            recent = self.tracker.tracks(ended_after_s=self.bodies.sent_since(ended_ids))
+            changed = [t for t in recent if t.id in ended_ids] + live_now
+        track_rows, track_events = self._track_changes(
+            changed, live_ids=live_ids, also_geodetic=unfilled
+        )
+        events += track_events
+        activity = [p.event for _, p in track_events if isinstance(p, EventPayload)]
+        released_t = self.feed.released_t
+        if self.live_events is not None and math.isfinite(released_t):
+            if self.live_events.due(released_t):
+                window = released_t - self.live_events.params.window_s
+                found = self.live_events.evaluate(
+                    self._window_tracks(window), self.bodies.live_ids, released_t
+                )
+                for body in found:
+                    activity.append(body)
+                    if body["state"] != "update":
+                        events.append(("event", event_message(body)))
+        events += sensor_status_messages(
+            sorted({d.sensor for d in dets}), self._last_t, self._n_det
+        )
+        for ack, t in acks:
+            n_fixes = sum(1 for i in ack["detection_ids"] if i in fixed)
+            events.append(("event", ingest_message(ack, n_fixes, t)))
+        store_and_publish(
+            self.store, self.publish, rows, track_rows, events, activity, self.bodies.stored
+        )
+        self._drop_ended()  # after their final rows are stored
+
+    def _window_tracks(self, t_from: float) -> list[Track]:
+        """Tracks with a point at or after ``t_from`` (live ones and recently ended)."""
+        tracks = self.tracker.tracks(ended_after_s=t_from)
+        return [t for t in tracks if t.points and t.points[-1].t_s >= t_from]
+
+    # ------------------------------------------------------------------ tracks
+    def _refresh_points(
+        self, tracks: Sequence[Track], also_geodetic: Sequence[Geodetic] = ()
+    ) -> None:
+        """Bring the cached JSON points of ``tracks`` up to date (:meth:`.TrackBodies.refresh`)."""
+        self.bodies.refresh(tracks, also_geodetic)
+
+    def track_body(self, track: Track, live: bool, first_index: int = 0) -> dict[str, Any]:
+        """JSON body of a track, points from ``first_index`` on."""
+        return self.bodies.body(track, live, first_index)
+
+    def _track_changes(
+        self,
+        tracks: Sequence[Track],
+        force: bool = False,
+        live_ids: set[int] | None = None,
+        also_geodetic: Sequence[Geodetic] = (),
+    ) -> tuple[list[dict[str, Any]], list[tuple[str, StreamPayload]]]:
+        """Of ``tracks``, those that changed since the last call: table rows and messages."""
+        if live_ids is None:
+            live_ids = {t.id for t in self.tracker.tracks(include_ended=False)}
+        lag = int(getattr(self.tracker.config, "smoothing_lag", 0))
+        return self.bodies.changes(
+            tracks, live_ids, lag, self.track_body, force=force, also_geodetic=also_geodetic
+        )

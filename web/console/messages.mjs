@@ -1,0 +1,31 @@
+// What the live stream's messages do to the page: fixes, track updates, events and sensor
+// status go into the store (or the camera panels); a reset reloads the tracks.
+
+import * as api from "./api.mjs";
+import { KIND, normEvent } from "./events.mjs";
+import { store, ui } from "./state.mjs";
+import { fmtT } from "./util.mjs";
+
+/** One stream message (stream.mjs hands them on one by one, in order). */
+export function onMessage(msg) {
+  if (msg.type === "fix") store.applyFix(msg.fix);
+  else if (msg.type === "track_update") store.applyTrack(msg.track);
+  else if (msg.type === "event") {
+    // `ingest` (a batch accepted) is the server's bookkeeping, not an operator's event.
+    if (msg.kind !== KIND.INGEST) store.applyEvent(normEvent(msg));
+  }
+  else if (msg.type === "sensor_status") {
+    store.sensorStatus.set(msg.sensor, msg);
+    const p = ui.cams.get(msg.sensor);
+    if (p) p.status.textContent = `${msg.n_detections} detections · last ${fmtT(msg.last_t_s)}`;
+  }
+  ui.dirty = true;
+}
+
+/** The server's stream started over (a new database): the store reloads its tracks. */
+export async function onReset() {
+  store.clear();
+  const r = await api.getJSON("/api/tracks");
+  r.tracks.forEach((t) => store.applyTrack(t));
+  ui.dirty = true;
+}

@@ -1,0 +1,94 @@
+// The left sidebar's layer list (a toggle and a legend per map layer, the visibility
+// layers' controls) and filters (class, sensor, track ids).
+
+import { ACTIVITY_COLOUR, eventColour, KIND } from "./events.mjs";
+import { drawLists } from "./lists.mjs";
+import { timeline, ui } from "./state.mjs";
+import { $, classColour, el } from "./util.mjs";
+
+/** Whether the layer's toggle is ticked (true before the list is built). */
+export function layerChecked(name) {
+  const box = document.querySelector(`#layers input[data-layer="${name}"]`);
+  return box ? box.checked : true;
+}
+
+const LEGENDS = {
+  tracks: [["swatch", "vehicle", "vehicle"], ["swatch", "human", "human"]],
+  synopsis: [["swatch line", "#ccc", "tracked"], ["swatch dash", "#ccc", "hand-off gap"]],
+  sensors: [["swatch", "#7fdcff", "camera"]],
+  coverage: [["swatch", "rgba(120,200,255,0.35)", "ground footprint"]],
+  geolocation: [["swatch", "#ff2bd6", "terrain hit"], ["swatch", "#ffe600", "chosen hit, 1σ"]],
+  events: [["swatch", eventColour(KIND.TRACK_CONFIRMED), "track confirmed"],
+    ["swatch", eventColour(KIND.TRACK_ENDED), "track ended"],
+    ["swatch", ACTIVITY_COLOUR, "activity (loiter, meet, convoy)"],
+    ["swatch", eventColour(KIND.HANDOFF), "hand-off"]],
+  markers: [["swatch", "#ffffff", "kept marker"]],
+  roads: [["swatch line", "#f5ebc8", "road"]],
+};
+
+/** A row per map layer: its toggle, then its legend or its own controls. */
+export function buildLayerList() {
+  const root = $("#layers");
+  root.replaceChildren();
+  for (const layer of ui.map.layerList()) {
+    const name = layer.get("name");
+    const box = el("input", { type: "checkbox", checked: layer.getVisible(), "data-layer": name, id: `layer-${name}` });
+    box.addEventListener("change", () => {
+      layer.setVisible(box.checked);
+      if (box.checked) ui.vis.ensure(name); // the visibility layers load when first shown
+      ui.dirty = true;
+    });
+    // One parameter group (target, range) above the first of the visibility layers.
+    if (ui.vis.owns(name) && !root.querySelector("#vis-params")) root.append(ui.vis.paramControls());
+    root.append(el("div", { class: "layer-row" }, box, el("label", { for: `layer-${name}`, text: layer.get("title") })));
+    const controls = ui.vis.controls(name);
+    const legend = LEGENDS[name];
+    if (controls) {
+      root.append(controls);
+    } else if (legend) {
+      root.append(el("div", { class: "legend" }, ...legend.map(([cls, colour, text]) => {
+        const c = colour === "vehicle" || colour === "human" ? classColour(colour) : colour;
+        const style = cls.includes("line") || cls.includes("dash") ? `border-color:${c}` : `background:${c}`;
+        return el("span", {}, el("span", { class: cls, style }), text);
+      })));
+    }
+  }
+}
+
+/** The class and sensor checkboxes and the track-id field; each change redraws. */
+export function buildFilters() {
+  const cls = $("#filter-class");
+  for (const c of ["vehicle", "human"]) {
+    const box = el("input", { type: "checkbox", checked: true, "data-class": c });
+    box.addEventListener("change", () => {
+      if (box.checked) ui.filters.classes.add(c);
+      else ui.filters.classes.delete(c);
+      ui.filterVersion += 1;
+      ui.dirty = true;
+      drawLists(timeline.now());
+    });
+    cls.append(el("label", {}, box, " ", el("span", { class: "swatch", style: `background:${classColour(c)}` }), ` ${c}`));
+  }
+  const sens = $("#filter-sensor");
+  const chosen = new Set(ui.sensors.map((s) => s.id));
+  for (const s of ui.sensors) {
+    const box = el("input", { type: "checkbox", checked: true, "data-sensor": s.id });
+    box.addEventListener("change", () => {
+      if (box.checked) chosen.add(s.id);
+      else chosen.delete(s.id);
+      ui.filters.sensors = chosen.size === ui.sensors.length ? null : new Set(chosen);
+      ui.filterVersion += 1;
+      ui.dirty = true;
+      drawLists(timeline.now());
+    });
+    sens.append(el("label", {}, box, ` ${s.id}`));
+  }
+  $("#filter-track").addEventListener("input", (ev) => {
+    const ids = ev.target.value.split(/[\s,;]+/).filter(Boolean).map(Number).filter(Number.isInteger);
+    ui.filters.ids = ids.length ? new Set(ids) : null;
+    ui.filterVersion += 1;
+    ui.dirty = true;
+    drawLists(timeline.now());
+  });
+}
+
