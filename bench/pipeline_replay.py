@@ -84,11 +84,11 @@ def replay_in_process(args: argparse.Namespace, site_dir: Path, db: Path) -> lis
     """Replay into a pipeline; one row per ``args.every`` s of scenario time."""
     from demtrack.core.site.folder import load_site
     from demtrack.samplesite.replay_source import SAMPLE_SCENARIOS
-    from demtrack.server.store.database import Store
     from demtrack.server.gc_tuning import tune_gc_for_serving
     from demtrack.server.ingest.pipeline import Pipeline, pipeline_options
     from demtrack.server.replay import scenario_stream
     from demtrack.server.settings import Settings
+    from demtrack.server.store.database import Store
 
     settings = Settings(site=site_dir, db_path=db)
     site = load_site(site_dir)

@@ -161,8 +161,8 @@ def _ingest(url: str, batches: list[list[dict[str, Any]]]) -> tuple[float, int]:
 def _durable_only(site_dir: Path, batches: list[list[dict[str, Any]]]) -> float:
     """Validation and committed inserts alone, in-process (detections/s)."""
     from demtrack.core.site.folder import load_site
-    from demtrack.server.store.database import Store
     from demtrack.server.ingest.pipeline import Pipeline
+    from demtrack.server.store.database import Store
 
     site = load_site(site_dir)
     with tempfile.TemporaryDirectory() as tmp:

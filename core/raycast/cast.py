@@ -479,13 +479,16 @@ def cast_rays(
 
 
 def _is_frozen_value(dem: Any) -> bool:
-    """Whether ``dem`` is a frozen dataclass (a :class:`~demtrack.core.terrain.dem.Dem`).
+    """Whether ``dem`` is a frozen value with identity hashing, like a ``Dem``.
 
-    Its arrays cannot change under a cached caster. Tested by shape, not by importing
-    ``Dem``: the terrain package is below this one and ``Dem.ray_caster`` calls back here.
+    Its arrays cannot change under a cached caster, and it can key the weak cache. Tested
+    by shape, not by importing :class:`~demtrack.core.terrain.dem.Dem`: the terrain package
+    is below this one and ``Dem.ray_caster`` calls back here. Other DEM-like values (a
+    grid and an elevation array) get a caster of their own.
     """
-    params = getattr(type(dem), "__dataclass_params__", None)
-    return bool(params is not None and params.frozen)
+    kind = type(dem)
+    params = getattr(kind, "__dataclass_params__", None)
+    return bool(params is not None and params.frozen and kind.__hash__ is object.__hash__)
 
 
 def _validate_rays(

@@ -65,8 +65,8 @@ def vehicle_run_pipeline(site_dir: Path, tmp: Path, until_s: float):
     """
     from demtrack.core.site.folder import load_site
     from demtrack.samplesite.scenarios import make_scenario
-    from demtrack.server.store.database import Store
     from demtrack.server.ingest.pipeline import Pipeline
+    from demtrack.server.store.database import Store
 
     site = load_site(site_dir)
     records = [

@@ -20,9 +20,9 @@ from server_helpers import AUTH, make_app, post_in_time_batches, walk
 
 from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import make_scenario
-from demtrack.server.store.codec import encode_json
 from demtrack.server.json_response import json_response
 from demtrack.server.models import StoredDetectionOut, TracksOut
+from demtrack.server.store.codec import encode_json
 from demtrack.server.synopsis import synopsis
 from demtrack.server.synopsis_models import SynopsisOut
 from demtrack.server.track_query import filter_tracks

@@ -10,9 +10,9 @@ from server_helpers import vehicle_run_pipeline
 
 from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import make_scenario
-from demtrack.server.store.database import Store
 from demtrack.server.ingest.fix_codec import fix_from_body
 from demtrack.server.ingest.pipeline import Pipeline
+from demtrack.server.store.database import Store
 
 pytestmark = pytest.mark.timeout(600)
 

@@ -11,9 +11,9 @@ import pytest
 
 from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import make_scenario
-from demtrack.server.store.database import Store
 from demtrack.server.ingest.pipeline import Pipeline
 from demtrack.server.replay import scenario_frames
+from demtrack.server.store.database import Store
 
 pytestmark = pytest.mark.timeout(600)
 

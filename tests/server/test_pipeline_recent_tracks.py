@@ -17,9 +17,9 @@ import pytest
 from server_helpers import scenario_stream
 
 from demtrack.core.site.folder import load_site
-from demtrack.server.store.database import Store
-from demtrack.server.live_events import LiveEventParams
 from demtrack.server.ingest.pipeline import Pipeline
+from demtrack.server.live_events import LiveEventParams
+from demtrack.server.store.database import Store
 
 pytestmark = pytest.mark.timeout(600)
 

@@ -12,9 +12,9 @@ from server_helpers import walk
 from demtrack.core.activity.loitering import LoiterParams
 from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import make_scenario
-from demtrack.server.store.database import Store
-from demtrack.server.live_events import LiveEventParams
 from demtrack.server.ingest.pipeline import Pipeline
+from demtrack.server.live_events import LiveEventParams
+from demtrack.server.store.database import Store
 
 pytestmark = pytest.mark.timeout(600)
 

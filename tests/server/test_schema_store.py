@@ -5,8 +5,8 @@ from pathlib import Path
 
 import pytest
 
-from demtrack.server.store import database as db
 from demtrack.server.messages import SCHEMA_PATH, messages_schema, schema_text
+from demtrack.server.store import database as db
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -12,9 +12,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from demtrack.core.tracking.types import Detection
+from demtrack.server.hub import Hub, StreamMessage, encoded
 from demtrack.server.store.codec import dumps_json, published_text
 from demtrack.server.store.database import Store
-from demtrack.server.hub import Hub, StreamMessage, encoded
 
 _scalars = st.one_of(
     st.none(),

@@ -19,9 +19,9 @@ from server_helpers import scenario_stream
 
 from demtrack.core.site.folder import load_site
 from demtrack.server import store as db
+from demtrack.server.ingest.pipeline import Pipeline
 from demtrack.server.store.codec import dumps_json, track_body_text
 from demtrack.server.store.database import Store
-from demtrack.server.ingest.pipeline import Pipeline
 
 pytestmark = pytest.mark.timeout(600)
 

@@ -16,10 +16,10 @@ from server_helpers import AUTH, make_app, walk
 from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import make_scenario
 from demtrack.server import store as db
+from demtrack.server.ingest.pipeline import Pipeline
+from demtrack.server.models import TracksOut
 from demtrack.server.store.codec import loads_json
 from demtrack.server.store.database import Store
-from demtrack.server.models import TracksOut
-from demtrack.server.ingest.pipeline import Pipeline
 from demtrack.server.synopsis import (
     assemble,
     trajectory,
