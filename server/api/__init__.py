@@ -8,33 +8,3 @@ dependency aliases live in :mod:`.deps`; engine exceptions become HTTP statuses 
 :mod:`.errors` only. May import the rest of ``server`` and ``core``; nothing below
 imports it (the live stream is :mod:`demtrack.server.stream`).
 """
-
-from __future__ import annotations
-
-from . import (
-    detections,
-    events,
-    geolocate,
-    health,
-    scene3d,
-    sensors,
-    site,
-    synopsis,
-    tracks,
-    visibility,
-    web,
-)
-
-__all__ = [
-    "detections",
-    "events",
-    "geolocate",
-    "health",
-    "scene3d",
-    "sensors",
-    "site",
-    "synopsis",
-    "tracks",
-    "visibility",
-    "web",
-]

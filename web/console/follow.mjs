@@ -6,7 +6,7 @@
 // The page's follow session is a random id made up at load. Its viser client (the 3D
 // tab's iframe) joins it by connecting its WebSocket on /follow/<session>: viser's client
 // takes the WebSocket URL from its `?websocket=` URL parameter (viserFrameUrl), and the
-// scene reads the path of each connection (server/scene3d.py).
+// scene reads the path of each connection (server/scene3d/connections.py).
 //
 // One request in flight; the newest choice wins (a quick re-selection sends only the
 // last one once the first answer is in). A request that fails on the way (no answer, a

@@ -1,4 +1,4 @@
-// Map layers of what the cameras can see (server/routers/visibility.py):
+// Map layers of what the cameras can see (server/api/visibility.py, server/visibility_service.py):
 //
 // - "Coverage: sensors seeing": /api/site/coverage.png, the number of sensors that see each
 //   DEM cell, an image on the DEM grid (placed like the relief), with its legend (from
