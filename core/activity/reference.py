@@ -4,7 +4,7 @@
 all-pairs versions :mod:`demtrack.core.activity.detectors` started from: every pair of
 trajectories goes through the full test, nothing is pruned.
 :func:`detect_loitering_reference` grows each window point by point. The optimised
-detectors must return exactly the same events (``tests/core/test_activity_reference.py``),
+detectors must return exactly the same events (``tests/core/activity/test_activity_reference.py``),
 as the numba kernels are checked against their plain-numpy twins.
 """
 
