@@ -20,6 +20,7 @@ __all__ = [
     "NotFoundError",
     "QueryError",
     "RaycastError",
+    "SettingsError",
     "SiteError",
     "TrackingError",
     "UnknownSensorError",
@@ -80,3 +81,7 @@ class DetectionError(DemtrackError, ValueError):
 
 class TrackingError(DemtrackError, ValueError):
     """Invalid tracker configuration or state."""
+
+
+class SettingsError(DemtrackError, ValueError):
+    """A server setting (a ``DEMTRACK_*`` variable or ``.env`` line) has a bad value."""

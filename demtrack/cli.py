@@ -9,10 +9,13 @@ and exit status 2; nothing prints a traceback for them.
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from collections.abc import Sequence
+from typing import Any, NoReturn
 
 from demtrack.commands import COMMANDS
+from demtrack.commands.common import finite
 from demtrack.core.errors import DemtrackError
 
 __all__ = ["build_parser", "console_main", "main"]
@@ -20,9 +23,25 @@ __all__ = ["build_parser", "console_main", "main"]
 EXIT_USER_ERROR = 2
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors, and every ``type=float`` option finite.
+
+    The subcommands' parsers are of this class too (``add_subparsers`` uses the parent's).
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.register("type", float, finite)  # NaN and infinities are mistakes everywhere
+
+    def error(self, message: str) -> NoReturn:
+        """Print ``prog: error: message`` as one line and exit with status 2."""
+        message = re.sub(r"^argument ([^:]+): ", r"\1 ", message)  # "--speed must be ..."
+        self.exit(EXIT_USER_ERROR, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The full argument parser with every command registered."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="demtrack",
         description="Geolocate and track people and vehicles from calibrated cameras and a DEM.",
     )
@@ -45,8 +64,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except DemtrackError as exc:
         print(f"demtrack {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_USER_ERROR
-    except (FileNotFoundError, IsADirectoryError, PermissionError) as exc:
-        print(f"demtrack {args.command}: error: {exc.strerror}: {exc.filename}", file=sys.stderr)
+    except OSError as exc:  # a missing, unreadable or unwritable file, a full disk
+        if exc.strerror and exc.filename:
+            what = f"{exc.strerror}: {exc.filename}"
+        else:
+            what = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        print(f"demtrack {args.command}: error: {what}", file=sys.stderr)
         return EXIT_USER_ERROR
     except KeyboardInterrupt:
         print(f"demtrack {args.command}: interrupted", file=sys.stderr)

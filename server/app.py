@@ -14,6 +14,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import sqlite3
 import threading
 import time
 from collections.abc import AsyncIterator
@@ -22,18 +23,21 @@ from typing import Any
 
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
+from pydantic import ValidationError
 from starlette.concurrency import run_in_threadpool
 
-from demtrack.core.errors import DemtrackError, SiteError
+from demtrack.core.errors import DemtrackError, SettingsError, SiteError
 from demtrack.core.site.folder import Site, load_site
 from demtrack.core.tracking import METHODS
 from demtrack.core.warm import SERVER_ENGINES, warm_up
 
 from .api import (
     detections,
+    docs,
     events,
     geolocate,
     health,
+    markers,
     scene3d,
     sensors,
     site,
@@ -43,18 +47,18 @@ from .api import (
     web,
 )
 from .api.deps import READER
-from .api.errors import install_error_handlers
+from .api.errors import error_responses, install_error_handlers
 from .hub import Hub
 from .ingest.pipeline import Pipeline, Publisher, pipeline_options
 from .replay import Replay, scenario_stream, start_time_after
 from .scenario_source import ScenarioSource
-from .security import resolve_token
+from .security import RequestGate, install_log_redaction, resolve_token
 from .settings import Settings
 from .state import ConsoleState
 from .store.database import Store
 from .stream import endpoint as stream
 
-__all__ = ["create_app"]
+__all__ = ["check_startup", "create_app"]
 
 log = logging.getLogger("demtrack.server")
 
@@ -171,6 +175,33 @@ def _start_replay(
     return replay.start()
 
 
+def check_startup(app: FastAPI) -> None:
+    """Load the site and open the database before the server starts, or raise one line.
+
+    ``demtrack serve`` and ``demtrack demo`` call it before uvicorn runs: a failure
+    inside the lifespan would reach the operator as uvicorn's traceback and "Application
+    startup failed". The loaded site is kept (``app.state.preloaded_site``) for the
+    lifespan, so nothing is read twice.
+
+    Raises
+    ------
+    SiteError
+        The site folder, a file it names (DEM, roads, images) or the database cannot be
+        used; the message names the file and the problem.
+    """
+    settings: Settings = app.state.settings
+    app.state.preloaded_site = load_site(settings.site)
+    path = settings.resolved_db_path
+    try:
+        Store(path).close()
+    except sqlite3.DatabaseError as exc:
+        raise SiteError(f"database {path} cannot be used: {exc}") from None
+    except RuntimeError as exc:  # a newer schema
+        raise SiteError(f"database {path}: {exc}") from None
+    except OSError as exc:
+        raise SiteError(f"database {path} cannot be opened: {exc.strerror or exc}") from None
+
+
 @asynccontextmanager
 async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     settings: Settings = app.state.settings
@@ -184,7 +215,10 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
         ).start()
     else:
         app.state.warm.set()
-    site_ = await run_in_threadpool(load_site, settings.site)
+    preloaded: Site | None = getattr(app.state, "preloaded_site", None)  # check_startup's
+    site_ = (
+        preloaded if preloaded is not None else await run_in_threadpool(load_site, settings.site)
+    )
     store = Store(settings.resolved_db_path)
     hub = Hub(settings.ws_queue_size)
     hub.bind(asyncio.get_running_loop())
@@ -200,6 +234,7 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     caster = await run_in_threadpool(site_.dem.ray_caster)
     counts = await run_in_threadpool(pipeline.start)
     hub.last_seq = store.last_seq()
+    app.state.schema_version = store.schema_version()  # /api/health reads no database
     log.info("replayed %(replayed)d fixes, processed %(processed)d detections", counts)
     app.state.console = ConsoleState(settings, site_, store, hub, pipeline, caster)
     app.state.replay = (
@@ -254,7 +289,16 @@ def create_app(
     ``<db>.token``): ``app.state.token``, ``app.state.token_file`` and
     ``app.state.token_generated`` tell the caller what to print.
     """
-    settings = settings if settings is not None else Settings(**overrides)
+    if settings is None:
+        try:
+            settings = Settings(**overrides)
+        except ValidationError as exc:  # a bad DEMTRACK_* variable or .env line, one line
+            first = exc.errors()[0]
+            name = ".".join(str(x) for x in first.get("loc", ())) or "settings"
+            raise SettingsError(
+                f"setting {name} (DEMTRACK_{name.upper()}): {first.get('msg', 'invalid')}"
+                + (f" (and {exc.error_count() - 1} more)" if exc.error_count() > 1 else "")
+            ) from None
     _check(settings, scenarios)
     if not (settings.site / "site.json").is_file():
         raise SiteError(f"not a site folder (no site.json): {settings.site}")
@@ -263,11 +307,16 @@ def create_app(
         version="0.1.0",
         summary="Geolocate and track people and vehicles from calibrated cameras and a DEM.",
         lifespan=_lifespan,
-        max_body_size=settings.max_body_bytes,
+        docs_url=None,  # /docs and /redoc come from api/docs.py, on local assets
+        redoc_url=None,
     )
     app.state.settings = settings
     app.state.scenarios = scenarios
     app.state.token, app.state.token_file, app.state.token_generated = resolve_token(settings)
+    install_log_redaction()
+    # The token before any body is read, then the size limit (inside CORS, so a refusal
+    # still carries CORS headers).
+    app.add_middleware(RequestGate, max_body_bytes=settings.max_body_bytes)
     if settings.cors_origins:
         app.add_middleware(
             CORSMiddleware,
@@ -276,16 +325,21 @@ def create_app(
             allow_headers=["Authorization", "Content-Type", "X-Demtrack-Token"],
         )
     install_error_handlers(app)
+    # The error statuses each router's routes can answer (OpenAPI `responses`).
+    read = error_responses(401, 404, 422)
     app.include_router(health.router)
-    app.include_router(site.router, dependencies=READER)
-    app.include_router(sensors.router, dependencies=READER)
-    app.include_router(geolocate.router, dependencies=READER)
-    app.include_router(detections.router)
-    app.include_router(tracks.router, dependencies=READER)
-    app.include_router(synopsis.router, dependencies=READER)
-    app.include_router(events.router, dependencies=READER)
-    app.include_router(visibility.router, dependencies=READER)
-    app.include_router(scene3d.router)
+    app.include_router(site.router, dependencies=READER, responses=read)
+    app.include_router(sensors.router, dependencies=READER, responses=read)
+    app.include_router(geolocate.router, dependencies=READER, responses=read)
+    app.include_router(detections.router)  # its routes name their own statuses
+    app.include_router(tracks.router, dependencies=READER, responses=read)
+    app.include_router(synopsis.router, dependencies=READER, responses=read)
+    app.include_router(events.router, dependencies=READER, responses=read)
+    # markers' routes name their own token checks
+    app.include_router(markers.router, responses=error_responses(401, 404, 422, 503, 507))
+    app.include_router(visibility.router, dependencies=READER, responses=read)
+    app.include_router(scene3d.router, responses=read)
     app.include_router(stream.router)
     app.include_router(web.router)
+    app.include_router(docs.router)
     return app

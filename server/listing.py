@@ -17,7 +17,7 @@ from demtrack.core.tracking.types import Detection
 from .state import ConsoleState
 from .track_query import check_window
 
-__all__ = ["EVENT_KINDS", "detection_rows", "list_detections", "list_events"]
+__all__ = ["EVENT_KINDS", "HAPPENED_KINDS", "detection_rows", "list_detections", "list_events"]
 
 #: Kinds of stored events.
 EVENT_KINDS = (
@@ -78,6 +78,11 @@ def detection_rows(rows: list[tuple[int, Detection]]) -> list[dict[str, Any]]:
     ]
 
 
+#: What happened: every stored kind but the hand-off prediction (a per-track annotation,
+#: listed only when asked for with ``kind=handoff``).
+HAPPENED_KINDS = tuple(k for k in EVENT_KINDS if k != "handoff")
+
+
 def list_events(
     state: ConsoleState,
     t_from: float | None,
@@ -86,20 +91,35 @@ def list_events(
     track: int | None,
     open_only: bool,
     limit: int,
-) -> list[dict[str, Any]]:
+    sensors: Sequence[str] | None = None,
+    offset: int = 0,
+) -> tuple[list[dict[str, Any]], int | None]:
     """Stored events whose ``[t_start_s, t_end_s]`` overlaps the window, by start time.
 
-    ``kinds``: only these (default all); ``track``: only events involving it;
-    ``open_only``: only episodes still going on; at most ``limit``.
+    ``kinds``: only these (default :data:`HAPPENED_KINDS`: hand-off predictions only when
+    asked for); ``track``: only events involving it; ``sensors``: only events one of them
+    saw; ``open_only``: only episodes still going on; ``offset`` rows skipped, then at most
+    ``limit``. Returns the rows and the ``offset`` of the next page (None: no more).
     """
     check_window(t_from, t_to)
+    if sensors:
+        known = state.site.sensors
+        unknown = [s for s in sensors if s not in known]
+        if unknown:
+            raise NotFoundError(f"unknown sensor {unknown[0]!r}")
+    filtered = track is not None or bool(sensors)
     rows: list[dict[str, Any]] = state.store.activity(
         t_from=t_from,
         t_to=t_to,
-        kinds=kinds,
+        kinds=list(kinds) if kinds else list(HAPPENED_KINDS),
         open_only=open_only,
-        limit=limit if track is None else 100_000,
+        limit=offset + limit + 1 if not filtered else 1_000_000,
     )
     if track is not None:
-        rows = [r for r in rows if track in r["track_ids"]][:limit]
-    return rows
+        rows = [r for r in rows if track in r["track_ids"]]
+    if sensors:
+        wanted = set(sensors)
+        rows = [r for r in rows if wanted.intersection(r.get("sensors") or ())]
+    page = rows[offset : offset + limit]
+    more = len(rows) > offset + limit
+    return page, (offset + limit if more else None)

@@ -12,8 +12,16 @@ targets, overlapping or touching the known episode in time) extends the known on
 of starting another; it is closed when an evaluation no longer finds it or its end lags
 the present by more than ``2 * every_s + 2 * sample_s + 1`` s (the targets moved on), and
 is not announced again while the window still holds it. Zone crossings
-are instantaneous: one per track, zone and direction within ``2 * every_s``. A hand-off
-prediction is reported when a track's (current sensor, next sensor) pair changes.
+are instantaneous: one per track, zone and direction within ``2 * every_s``.
+
+A hand-off prediction is not something that happened but an annotation on a live track:
+each track has one, keyed ``handoff:<track id>`` (so the stored row is replaced, never a
+new row per evaluation), reported again (streamed with the same key) only when its
+(current sensor, next sensor) pair changes: at once when the current sensor changes, and
+when only the next sensor does, once the new one has held for :data:`HANDOFF_HOLD`
+evaluations in a row (two cameras about equally likely would otherwise flip the
+prediction every evaluation). ``/api/events`` leaves predictions out unless asked
+(``kind=handoff``); the console shows them in the track's detail, not in the event list.
 
 Each event is a JSON-ready dict (the body of the ``activity`` table and of the
 ``event`` stream message's ``event`` field): ``key`` (stable identity), ``kind``,
@@ -43,7 +51,10 @@ from demtrack.core.tracking.types import Track
 from demtrack.core.visibility.handoff import HandoffTarget, predict_handoffs
 from demtrack.core.visibility.target_heights import target_height_for
 
-__all__ = ["LiveEventParams", "LiveEvents", "Window"]
+__all__ = ["HANDOFF_HOLD", "LiveEventParams", "LiveEvents", "Window"]
+
+#: Evaluations in a row a changed next sensor must hold before it replaces a prediction.
+HANDOFF_HOLD = 3
 
 
 @dataclass(frozen=True)
@@ -128,6 +139,8 @@ class LiveEvents:
         self._crossings: dict[str, float] = {}
         self._closed: dict[str, float] = {}
         self._handoff: dict[int, tuple[str | None, str | None]] = {}
+        # a track's new (current, next) pair and how many evaluations in a row gave it
+        self._pending: dict[int, tuple[tuple[str | None, str | None], int]] = {}
         for body in known:
             if body["kind"] == EventKind.HANDOFF:
                 d = body["details"]
@@ -303,8 +316,20 @@ class LiveEvents:
             pair = (pred.current, pred.next_sensor)
             if pred.exit_in_s is None or pred.next_sensor is None:
                 continue
-            if self._handoff.get(tr.id) == pair:
+            known = self._handoff.get(tr.id)
+            if known == pair:
+                self._pending.pop(tr.id, None)
                 continue
+            if known is not None and known[0] == pair[0]:
+                # Only the next sensor differs: two cameras about equally likely flip from
+                # one evaluation to the next; the prediction changes once the new one has
+                # held for HANDOFF_HOLD evaluations in a row.
+                seen, n = self._pending.get(tr.id, (None, 0))
+                n = n + 1 if seen == pair else 1
+                self._pending[tr.id] = (pair, n)
+                if n < HANDOFF_HOLD:
+                    continue
+            self._pending.pop(tr.id, None)
             self._handoff[tr.id] = pair
             acq = pred.acquisition_enu
             where = last.p_enu if acq is None else acq
@@ -326,11 +351,16 @@ class LiveEvents:
                 where,
                 details,
             )
-            ident = f"{EventKind.HANDOFF}:{tr.id}:{pred.current}>{pred.next_sensor}"
+            # One prediction per track, replaced: the same key every time (the stored row
+            # is updated in place). Each new prediction is a "start" (the pipeline streams
+            # starts and ends, not updates), so every console gets it.
+            ident = f"{EventKind.HANDOFF}:{tr.id}"
             body = self._body(e, {}, ident)
+            body["key"] = ident
             body["sensors"] = [s for s in pair if s is not None]
             out.append(self._geo(body))
         self._handoff = {k: v for k, v in self._handoff.items() if k in live_ids}
+        self._pending = {k: v for k, v in self._pending.items() if k in live_ids}
         return out
 
 

@@ -1,9 +1,11 @@
 """WebSocket messages: pydantic models with a ``type`` discriminator.
 
 Server -> client stream messages (``fix``, ``track_update``, ``sensor_status``,
-``event``) carry ``seq``, a number that grows by one per stored message; a client that
-reconnects with ``/ws?since=N`` (or sends ``{"type": "resume", "since": N}``) is sent
-every stream message with ``seq > N`` first. Control messages (``hello``, ``pong``,
+``event``, ``marker``) carry ``seq``, a number that grows by one per stored message; a client that
+reconnects with ``/ws?since=N&store=<store_id>`` (or sends ``{"type": "resume", "since":
+N}``) is sent every stream message with ``seq > N`` first; a ``since`` of another store
+(``hello.store_id``) or beyond the newest message starts the client over
+(``hello.start_over``). Control messages (``hello``, ``pong``,
 ``error``) are not stored and have ``seq: null``. A client that connects with
 ``/ws?batch=1`` may also be sent ``batch`` messages (``seq: null``): several stream
 messages in one frame, in ``seq`` order, each as it would have come alone.
@@ -36,6 +38,9 @@ __all__ = [
     "FixMessage",
     "HelloMessage",
     "HitBody",
+    "MAX_SEQ",
+    "MarkerBody",
+    "MarkerMessage",
     "PingMessage",
     "PongMessage",
     "ResumeMessage",
@@ -197,8 +202,39 @@ class EventMessage(_Model):
     event: EventBody | None = Field(default=None, description="the detected event, if any")
 
 
+class MarkerBody(_Model):
+    """A point an operator keeps (``/api/markers``): where, when, and what it is."""
+
+    id: int = Field(description="marker id (never reused)")
+    t_s: float = Field(description="the moment it marks (UNIX s, UTC)")
+    time_utc: str = Field(description="t_s as ISO 8601 UTC with Z")
+    name: str
+    note: str
+    e_m: float = Field(description="site frame east (m)")
+    n_m: float = Field(description="site frame north (m)")
+    u_m: float = Field(description="site frame up (m)")
+    lat_deg: float
+    lon_deg: float
+    h_m: float = Field(description="above the WGS84 ellipsoid (m)")
+    mgrs: str = Field(description="MGRS grid reference, 1 m precision")
+    source: dict[str, Any] = Field(description="where it came from (sensor, pixel, rule)")
+
+
+class MarkerMessage(_Model):
+    """A marker kept (``action: add``), renamed or noted (``update``), or removed (``delete``).
+
+    ``marker``: the marker as stored now (null for ``delete``).
+    """
+
+    type: Literal["marker"] = "marker"
+    action: Literal["add", "update", "delete"]
+    id: int
+    marker: MarkerBody | None
+    seq: int
+
+
 StreamMessage = Annotated[
-    FixMessage | TrackUpdateMessage | SensorStatusMessage | EventMessage,
+    FixMessage | TrackUpdateMessage | SensorStatusMessage | EventMessage | MarkerMessage,
     Field(discriminator="type"),
 ]
 
@@ -220,13 +256,29 @@ class BatchMessage(_Model):
     )
 
 
+#: The largest ``since`` a client may ask for (SQLite's largest integer).
+MAX_SEQ = 2**63 - 1
+
+
 class HelloMessage(_Model):
-    """First message on a connection."""
+    """First message on a connection (and the answer to a ``resume`` that cannot resume).
+
+    ``store_id`` names the database the sequence numbers belong to (a new one after the
+    server starts on a fresh file). ``start_over`` is true when the ``since`` asked for
+    cannot be resumed from - it belongs to another store (``/ws?store=<id>`` differs) or
+    lies beyond ``last_seq`` - so the client must drop what it holds and reload; it is
+    then sent every message after ``last_seq``.
+    """
 
     type: Literal["hello"] = "hello"
     seq: None = None
     last_seq: int = Field(description="the newest stored stream message")
     since: int | None = Field(description="the resume point asked for, if any")
+    store_id: str = Field(description="the store (database) the sequence numbers belong to")
+    start_over: bool = Field(
+        default=False,
+        description="since cannot be resumed (another store, or beyond last_seq): start over",
+    )
 
 
 class PongMessage(_Model):
@@ -256,7 +308,7 @@ class ResumeMessage(_Model):
     """Client -> server: send every stream message with ``seq > since``."""
 
     type: Literal["resume"]
-    since: int = Field(ge=0)
+    since: int = Field(ge=0, le=MAX_SEQ)
 
 
 ServerMessage = Annotated[
@@ -264,6 +316,7 @@ ServerMessage = Annotated[
     | TrackUpdateMessage
     | SensorStatusMessage
     | EventMessage
+    | MarkerMessage
     | BatchMessage
     | HelloMessage
     | PongMessage
@@ -276,6 +329,7 @@ AnyMessage = Annotated[
     | TrackUpdateMessage
     | SensorStatusMessage
     | EventMessage
+    | MarkerMessage
     | BatchMessage
     | HelloMessage
     | PongMessage
@@ -290,6 +344,7 @@ _SERVER_TYPES = [
     "track_update",
     "sensor_status",
     "event",
+    "marker",
     "batch",
     "hello",
     "pong",

@@ -1,40 +1,53 @@
-"""Stored track bodies written as files: GeoJSON, CSV, GPX, KML and GeoPackage.
+"""Stored track bodies written as files: GeoJSON, CSV, GPX, KML, KMZ and GeoPackage.
 
-The writers are :mod:`demtrack.core.io.track_io`'s (the ``demtrack track`` CLI's
-formats); this module turns the server's stored (possibly clipped) bodies into
-:class:`~demtrack.core.tracking.types.Track` values and picks the writer. Heights are
-above the WGS84 ellipsoid.
+The one writer per format is :mod:`demtrack.core.io.track_io`'s (``demtrack track -o``
+uses the same); this module turns the server's stored (possibly clipped) bodies into
+:class:`~demtrack.core.tracking.types.Track` values, chooses the heights and times, and
+picks the writer. The console's export menu downloads from here.
+
+Heights: GeoJSON z, GeoPackage z and ``h_wgs84_m`` are ellipsoidal; KML ``absolute``, GPX
+``<ele>`` and ``elevation_m`` are orthometric, by the same rule as the console's readout
+(:func:`~demtrack.server.site_info.orthometric`): EGM96 evaluated per point when PROJ's
+``egm96_15.gtx`` is installed, else the site's stated constant undulation ``N``
+(``geoid_undulation_m``), else none: then those heights are the ellipsoidal ones, and
+every file says so.
+
+Times: the store keeps session seconds ``t_s`` with no wall clock, so each file's times are
+``epoch + t_s`` with the epoch declared in the file: the ``epoch`` parameter, else the UNIX
+epoch (1970-01-01T00:00:00Z, which is right as soon as ``t_s`` are UNIX seconds).
 """
 
 from __future__ import annotations
 
-import io
-import tempfile
 from datetime import UTC, datetime
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from demtrack.core.errors import QueryError
 from demtrack.core.io.track_io import (
-    write_tracks_csv,
-    write_tracks_geojson,
-    write_tracks_gpkg,
-    write_tracks_gpx,
-    write_tracks_kml,
+    TRACK_FORMATS,
+    UNIX_EPOCH,
+    HeightModel,
+    TimeBase,
+    track_file_bytes,
 )
 from demtrack.core.tracking.types import Track, TrackPoint
 
-__all__ = ["EXPORT_TYPES", "export_bytes", "parse_epoch", "track_from_body"]
+from .site_info import geoid_grid_path
+
+__all__ = [
+    "EXPORT_TYPES",
+    "export_bytes",
+    "parse_epoch",
+    "site_heights",
+    "time_base",
+    "track_from_body",
+]
 
 #: Export format -> (media type, file suffix).
 EXPORT_TYPES: dict[str, tuple[str, str]] = {
-    "geojson": ("application/geo+json", ".geojson"),
-    "csv": ("text/csv; charset=utf-8", ".csv"),
-    "gpx": ("application/gpx+xml", ".gpx"),
-    "kml": ("application/vnd.google-earth.kml+xml", ".kml"),
-    "gpkg": ("application/geopackage+sqlite3", ".gpkg"),
+    name: (f.media_type, f.suffix) for name, f in TRACK_FORMATS.items()
 }
 
 
@@ -47,13 +60,13 @@ def track_from_body(body: dict[str, Any]) -> Track:
     return Track(body["id"], body["cls"], points, body["sensors"], [tuple(g) for g in body["gaps"]])
 
 
-def parse_epoch(text: str | None) -> datetime:
-    """The UTC time of ``t = 0 s``: ISO 8601 ``text``, or 2000-01-01T00:00:00Z when None.
+def parse_epoch(text: str | None) -> datetime | None:
+    """The UTC time of ``t = 0 s`` from ISO 8601 ``text``; None when not given.
 
     A time without a zone is taken as UTC; :class:`QueryError` when ``text`` is not ISO 8601.
     """
     if text is None:
-        return datetime(2000, 1, 1, tzinfo=UTC)  # as ``demtrack track`` without --epoch
+        return None
     try:
         when = datetime.fromisoformat(text.replace("Z", "+00:00"))
     except ValueError:
@@ -61,11 +74,38 @@ def parse_epoch(text: str | None) -> datetime:
     return when if when.tzinfo is not None else when.replace(tzinfo=UTC)
 
 
-def export_bytes(fmt: str, bodies: list[dict[str, Any]], frame: Any, epoch: datetime) -> bytes:
+def time_base(epoch: datetime | None, *, wall_clock: bool = False) -> TimeBase:
+    """The exports' times: ``epoch + t_s``, the UNIX epoch when none is given.
+
+    ``wall_clock``: the store's ``t_s`` are clock readings (UNIX seconds); it keeps none
+    today, so the files declare their times relative to the epoch.
+    """
+    return TimeBase(UNIX_EPOCH if epoch is None else epoch, wall_clock=wall_clock)
+
+
+def site_heights(site: Any, *, egm96: bool = True) -> HeightModel:
+    """The geoid model for sea-level heights: EGM96, else the site's stated ``N``, else none.
+
+    ``egm96=False`` skips the grid (the site's stated ``N`` only).
+    """
+    grid = geoid_grid_path() if egm96 else None
+    if grid is None:
+        return HeightModel.for_site(getattr(site, "geoid_undulation_m", 0.0))
+    return HeightModel.geoid_grid(grid, f"EGM96 ({grid.name}, evaluated at each point)")
+
+
+def export_bytes(
+    fmt: str,
+    bodies: list[dict[str, Any]],
+    frame: Any,
+    epoch: datetime | TimeBase | None = None,
+    heights: HeightModel | None = None,
+) -> bytes:
     """The file of format ``fmt`` (a key of :data:`EXPORT_TYPES`) holding ``bodies``.
 
     ``frame``: the site's :class:`~demtrack.core.geo.geodesy.LocalFrame`, for points the
-    bodies do not carry geodetic coordinates of.
+    bodies do not carry geodetic coordinates of; ``epoch``: the time of ``t_s = 0`` (or a
+    whole :class:`TimeBase`); ``heights``: the geoid model (none: ellipsoidal, declared).
     """
     tracks = [track_from_body(b) for b in bodies]
     # The stored points carry their geodetic coordinates: look them up, convert the rest.
@@ -82,18 +122,5 @@ def export_bytes(fmt: str, bodies: list[dict[str, Any]], frame: Any, epoch: date
         lat, lon, h = (float(np.asarray(v)) for v in frame.to_geodetic(e, n, u))
         return lat, lon, h
 
-    if fmt == "gpkg":
-        with tempfile.TemporaryDirectory() as tmp:
-            path = Path(tmp) / "tracks.gpkg"
-            write_tracks_gpkg(path, tracks, to_geodetic, epoch=epoch)
-            return path.read_bytes()
-    buf = io.StringIO()
-    if fmt == "geojson":
-        write_tracks_geojson(buf, tracks, to_geodetic, epoch=epoch)
-    elif fmt == "csv":
-        write_tracks_csv(buf, tracks, to_geodetic, epoch=epoch)
-    elif fmt == "gpx":
-        write_tracks_gpx(buf, tracks, to_geodetic, epoch=epoch)
-    else:
-        write_tracks_kml(buf, tracks, to_geodetic, epoch=epoch)
-    return buf.getvalue().encode("utf-8")
+    times = epoch if isinstance(epoch, TimeBase) else time_base(epoch)
+    return track_file_bytes(fmt, tracks, to_geodetic, times=times, heights=heights)

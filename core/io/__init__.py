@@ -1,6 +1,7 @@
 """Exchange formats.
 
-Detection records (CSV, JSON Lines) with per-record errors, track exports (GeoJSON, CSV,
-GPX, KML, GeoPackage) and GeoJSON reading. May import ``core.tracking.types``, ``core.geo``
-and ``core.errors``.
+Detection records (CSV, JSON Lines) with per-record errors, track exports with one writer
+per format (GeoJSON, CSV, GPX, KML/KMZ, GeoPackage: ``track_io`` and the ``export_*``
+modules) and GeoJSON reading. May import ``core.tracking.types``, ``core.geo`` and
+``core.errors``.
 """

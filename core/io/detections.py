@@ -231,13 +231,27 @@ def _open(source: Source, mode: str) -> Iterator[IO[str]]:
         yield source
 
 
+def _shown(value: Any) -> str:
+    """``value`` for a message: short, whatever its size (a 400-digit integer, a long text)."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        digits = len(str(abs(value))) if abs(value) < 10**4000 else 4000
+        if digits > 20:
+            return f"an integer of {'over ' if digits >= 4000 else ''}{digits} digits"
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
 def _float(value: Any, name: str) -> float:
     if isinstance(value, bool) or value is None:
         raise _Skip("malformed", f"{name} must be a number, got {value!r}")
     try:
         return float(value)
+    except OverflowError:  # an integer beyond a float's range (over 308 digits)
+        raise _Skip(
+            "malformed", f"{name} must be a number a float can hold, got {_shown(value)}"
+        ) from None
     except (TypeError, ValueError):
-        raise _Skip("malformed", f"{name} must be a number, got {value!r}") from None
+        raise _Skip("malformed", f"{name} must be a number, got {_shown(value)}") from None
 
 
 def read_detections_csv(

@@ -298,7 +298,7 @@ class Dem:
         cells; any single-band elevation GeoTIFF is accepted too (variance 0, count 1).
         """
         import rasterio
-        from rasterio.errors import RasterioIOError
+        from rasterio.errors import RasterioError
 
         path = Path(path)
         try:
@@ -318,6 +318,23 @@ class Dem:
                     var = np.zeros_like(elev)
                     cnt = np.where(np.isnan(elev), 0, 1).astype(np.int32)
                     filled = None
-        except RasterioIOError as exc:
-            raise InputFileError(f"cannot read DEM {path}: {exc}") from None
+        except RasterioError as exc:
+            raise InputFileError(f"cannot read DEM {path}: {_read_problem(exc)}") from None
         return cls(grid, elev, var, cnt, filled, crs_wkt, datum)
+
+
+def _read_problem(exc: Exception) -> str:
+    """What is wrong with a raster file rasterio could not read, in one line.
+
+    rasterio says "Read failed. See previous exception for details." when the header
+    opens but the pixel data does not (a truncated or damaged file); GDAL's own message is
+    the exception's cause.
+    """
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    if "Read failed" not in text:
+        return text
+    cause = exc.__cause__ or exc.__context__
+    detail = str(cause).strip().splitlines()[0] if cause is not None and str(cause).strip() else ""
+    return "the file is truncated or corrupt: its pixel data cannot be read" + (
+        f" ({detail})" if detail else ""
+    )

@@ -128,6 +128,13 @@ class TrackerConfig:
         ``clutter_density_per_m2`` (the density of an unrelated object). On a road
         network the prediction follows the roads, so identity survives a long occlusion
         without a gate that grows over the fields.
+    ray_gate_dz_m : float or None
+        A single camera's fix that no confirmed track took, whose viewing ray passes
+        through a confirmed track's gate (horizontally) within this height of the track's
+        ground (m), is that track's object seen with its hits off it (a crest's far
+        crossing, ground metres away along the ray): it neither feeds a tentative track
+        nor seeds one (:mod:`.raygate`). None: every such fix may seed (the phantom
+        tracks that shadow a real one along the ray come back).
     seed : int
         Seed of the particle filter's random generator.
     """
@@ -157,6 +164,7 @@ class TrackerConfig:
     road_join_rate_per_s: float = 1.0
     road_free_init: float = 0.05
     reacquire_s: float = 30.0
+    ray_gate_dz_m: float | None = 3.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -208,6 +216,12 @@ class TrackerConfig:
             math.isfinite(self.confirm_settle_s) and self.confirm_settle_s >= self.confirm_window_s
         ):
             raise TrackingError("confirm_settle_s must be finite and >= confirm_window_s")
+        if self.ray_gate_dz_m is not None and not (
+            math.isfinite(self.ray_gate_dz_m) and self.ray_gate_dz_m > 0
+        ):
+            raise TrackingError(
+                f"ray_gate_dz_m must be a positive number or None, got {self.ray_gate_dz_m}"
+            )
         if self.road_sigma_m is not None and not self.road_sigma_m > 0:
             raise TrackingError(f"road_sigma_m must be positive or None, got {self.road_sigma_m}")
 

@@ -19,7 +19,9 @@ name                   assembly
 Every method associates by global nearest neighbour with explicit missed detections,
 confirms tracks M-of-N once their position has settled (the raw baselines: M-of-N
 only), re-acquires lost vehicles along the roads, coasts through short occlusions,
-and (except the raw baselines) triangulates simultaneous fixes from two cameras and smooths its last
+and (except the raw baselines) triangulates simultaneous fixes from two cameras, lets no
+fix whose ray passes through a confirmed track seed another track (the ray gate,
+:mod:`.raygate`), and smooths its last
 ``config.smoothing_lag`` points (Rauch-Tung-Striebel for the Kalman filter, particle
 ancestry for the particle filter; the newest point is always the filtered one).
 """
@@ -55,7 +57,10 @@ Builder = Callable[[TrackerConfig, RoadGraph | None], TrackerComponents]
 
 
 def _assemble(
-    config: TrackerConfig, per_class: dict[str, ClassComponents], fuse: bool
+    config: TrackerConfig,
+    per_class: dict[str, ClassComponents],
+    fuse: bool,
+    ray_gate: bool | None = None,
 ) -> TrackerComponents:
     g = gate_d2(config.gate_probability)
     return TrackerComponents(
@@ -64,6 +69,9 @@ def _assemble(
         associator=GlobalNearestNeighbour(miss_cost=g),
         deleter=CoastTimeDeleter({c: config.params(c).max_coast_s for c in CLASSES}),
         fuse=fuse,
+        # The raw baselines (no fusion) keep plain hits' behaviour; the particle filters weigh
+        # every hit along a ray themselves (and gated, they split a close convoy's pairs).
+        ray_gate=fuse if ray_gate is None else ray_gate,
     )
 
 
@@ -158,7 +166,7 @@ def _multi(
         )
         for c in CLASSES
     }
-    return _assemble(config, per_class, fuse=True)
+    return _assemble(config, per_class, fuse=True, ray_gate=False)
 
 
 def build_multi_hypothesis(config: TrackerConfig, roads: RoadGraph | None) -> TrackerComponents:

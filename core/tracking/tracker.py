@@ -8,6 +8,9 @@ Processing, per *step* (fixes within ``config.step_window_s`` of the step's firs
    b. confirmed tracks: hypothesise each (track, measurement) of the same class and let
       the associator pick one hypothesis per track - a measurement or the explicit
       missed detection - then update;
+   b'. single-camera fixes left whose ray passes through a confirmed track's gate are
+      that track's object with its hits off it: they feed and seed nothing
+      (:mod:`.raygate`; ``config.ray_gate_dz_m``);
    c. tentative tracks: the associator gives each group of siblings (seeds of one fix)
       one measurement among those left; every sibling whose gate holds it updates
       (siblings do not compete, so the right one of "crown or road" is not starved);
@@ -32,7 +35,7 @@ import numpy as np
 from ..errors import TrackingError
 from .config import TrackerConfig
 from .fusion import fuse_measurements
-from .hypothesiser import CandidateBlock
+from .hypothesiser import CandidateBlock, gate_d2
 from .initiation import spread_m
 from .protocols import (
     Candidates,
@@ -46,6 +49,7 @@ from .protocols import (
     Reacquirer,
     SingleHypothesis,
 )
+from .raygate import ray_gate
 from .reacquire import MotionReacquirer, velocity_gaussian, velocity_prior_density
 from .types import Fix, Track, TrackPoint
 
@@ -91,6 +95,9 @@ class TrackerComponents:
         Ends confirmed tracks.
     fuse : bool
         Triangulate same-object pairs from two sensors.
+    ray_gate : bool
+        Fixes whose ray passes through a confirmed track's gate seed nothing
+        (:mod:`.raygate`; off for the raw baselines, which show what plain hits do).
     """
 
     per_class: Mapping[str, ClassComponents]
@@ -98,6 +105,7 @@ class TrackerComponents:
     associator: DataAssociator
     deleter: Deleter
     fuse: bool = True
+    ray_gate: bool = True
 
 
 @dataclass(eq=False)
@@ -257,6 +265,9 @@ class Tracker:
         self._next_id = 1
         #: Fixes that had no usable measurement (no hit), counted and skipped.
         self.n_unusable = 0
+        #: Fixes no track took whose ray passed through a confirmed track's gate (not seeds).
+        self.n_explained = 0
+        self._gate_d2 = gate_d2(config.gate_probability)
 
     # ----------------------------------------------------------------- feeding
     def _index(self, index: int | None) -> int:
@@ -330,22 +341,42 @@ class Tracker:
         return track
 
     def tracks(
-        self, *, include_ended: bool = True, ended_after_s: float | None = None
+        self,
+        *,
+        include_ended: bool = True,
+        ended_after_s: float | None = None,
+        include_lost: bool = True,
     ) -> list[Track]:
         """Return the confirmed tracks as values, by id (buffered fixes not yet included).
 
-        ``ended_after_s``: of the ended tracks, only those whose newest point is at or
-        after this time (s). A long live session ends thousands of tracks; asking for the
-        recent ones costs what they hold, not what every track ever held.
+        ``include_ended=False``: only the tracks that have not ended - those still
+        updated or coasting, and (with ``include_lost``) the *lost* ones: coasted past
+        their class's ``max_coast_s`` but still inside the re-acquisition window
+        (``config.reacquire_s``), so a later track may yet take their id. A track has
+        *ended* only once that can no longer happen: a live display announces "ended"
+        then, not while the object is merely occluded.
+
+        ``ended_after_s``: of the ended (and lost) tracks, only those whose newest point
+        is at or after this time (s). A long live session ends thousands of tracks;
+        asking for the recent ones costs what they hold, not what every track ever held.
         """
         recs = [r for r in self._live if r.track_id is not None]
-        if include_ended:
-            recs += [
-                r
-                for r in self._ended
-                if ended_after_s is None or (r.points and r.points[-1].t_s >= ended_after_s)
-            ]
+        for r in self._ended:
+            if not (include_ended or (include_lost and self._lost(r))):
+                continue
+            if ended_after_s is None or (r.points and r.points[-1].t_s >= ended_after_s):
+                recs.append(r)
         return [self._to_track(r) for r in sorted(recs, key=lambda r: r.track_id or 0)]
+
+    def _lost(self, rec: _Record) -> bool:
+        """Whether the deleted ``rec`` may still be taken up again (:meth:`_predecessor`)."""
+        window = self.config.reacquire_s
+        if window <= 0 or rec.track_id is None:
+            return False
+        if getattr(self.components.per_class[rec.cls].filter, "density", None) is None:
+            return False
+        # the next scan is at or after ``_t_done``: past the window then, past it for good
+        return self._t_done - rec.t_update <= window
 
     @property
     def n_held(self) -> tuple[int, int]:
@@ -497,6 +528,13 @@ class Tracker:
                     self._apply(rec, t, m, cands, hyp)
                     taken[hyp.measurement_index] = True
 
+        # A single camera's fix no confirmed track took, whose ray passes through one's
+        # gate, is that track's object seen with its hits off the object (a crest's far
+        # crossing, ground metres off along the ray): neither food for a tentative track
+        # nor a seed, or a phantom shadows the real track along the ray (:mod:`.raygate`).
+        if confirmed and self.components.ray_gate and self.config.ray_gate_dz_m is not None:
+            self._explained(confirmed, items, taken)
+
         # Tentative tracks compete group against group (so a false alarm's seed cannot
         # feed on a real object's fixes beside that object's own seed), but siblings of
         # one group share: each sibling in whose gate the group's measurement lies takes it.
@@ -529,6 +567,37 @@ class Tracker:
             if not taken[j]:
                 self._seed(t, m, cands)
         self._confirm_and_delete(t)
+
+    def _explained(
+        self,
+        confirmed: Sequence[_Record],
+        items: Sequence[tuple[Measurement, Candidates]],
+        taken: list[bool],
+    ) -> None:
+        """Mark as taken the free single-sensor fixes a confirmed track's ray gate holds."""
+        dz_max = self.config.ray_gate_dz_m
+        if dz_max is None:
+            return
+        by_cls: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        for j, (m, _) in enumerate(items):
+            if taken[j] or len(m.indices) != 1:
+                continue
+            tracks = by_cls.get(m.cls)
+            if tracks is None:
+                recs = [r for r in confirmed if r.cls == m.cls]
+                flt = self.components.per_class[m.cls].filter
+                gauss = [flt.gaussian(r.state) for r in recs]
+                tracks = by_cls[m.cls] = (
+                    np.array([g[0] for g in gauss]).reshape(-1, 2),
+                    np.array([g[1] for g in gauss]).reshape(-1, 2, 2),
+                    np.array([r.points[-1].p_enu[2] for r in recs]),
+                )
+            if not len(tracks[2]):
+                continue
+            fix = m.fix
+            if ray_gate(fix.origin_enu, fix.direction_enu, *tracks, self._gate_d2, dz_max).any():
+                taken[j] = True
+                self.n_explained += 1
 
     def _seed(self, t: float, m: Measurement, cands: Candidates) -> None:
         parts = self.components.per_class[m.cls]

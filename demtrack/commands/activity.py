@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from .choices import DEFAULT_METHOD, TRACKING_METHODS
-from .common import add_site_argument
+from .common import add_site_argument, positive
 
 __all__ = ["register"]
 
@@ -63,10 +63,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--method", choices=list(TRACKING_METHODS), default=DEFAULT_METHOD)
     p.add_argument("--zones", type=Path, metavar="ZONES.geojson", help="polygons (lon/lat)")
     # Unset options (None) keep LoiterParams / RendezvousParams / ConvoyParams defaults.
-    p.add_argument("--loiter-radius", type=float, metavar="M")
-    p.add_argument("--loiter-time", type=float, metavar="S")
-    p.add_argument("--meet-distance", type=float, metavar="M")
-    p.add_argument("--meet-time", type=float, metavar="S")
-    p.add_argument("--convoy-distance", type=float, metavar="M")
+    p.add_argument("--loiter-radius", type=positive, metavar="M")
+    p.add_argument("--loiter-time", type=positive, metavar="S")
+    p.add_argument("--meet-distance", type=positive, metavar="M")
+    p.add_argument("--meet-time", type=positive, metavar="S")
+    p.add_argument("--convoy-distance", type=positive, metavar="M")
     p.add_argument("--json", action="store_true", help="print events as JSON")
     p.set_defaults(func=_run)

@@ -8,6 +8,8 @@ from pathlib import Path
 
 from demtrack.core.errors import CrsError, InputFileError
 
+from .common import positive, require_suffix
+
 __all__ = ["register"]
 
 
@@ -33,6 +35,7 @@ def _run(args: argparse.Namespace) -> int:
     from demtrack.core.terrain.dem import VERTICAL_DATUM_LOCAL, Dem
     from demtrack.core.terrain.pointcloud import read_point_cloud
 
+    require_suffix(args.output, (".tif", ".tiff"), "--output")
     cloud = read_point_cloud(args.points).select(
         ground_only=args.ground_only, first_returns=args.first_returns
     )
@@ -104,7 +107,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("build-dem", help="grid laser points into a DEM GeoTIFF")
     p.add_argument("points", type=Path, help="points: .las/.laz, .npy (n x 3) or .csv x,y,z")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="DEM.tif")
-    p.add_argument("--cell", type=float, default=0.5, help="cell size in m (default 0.5)")
+    p.add_argument("--cell", type=positive, default=0.5, help="cell size in m (default 0.5)")
     p.add_argument(
         "--fill",
         type=Path,
@@ -113,7 +116,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--fill-sigma",
-        type=float,
+        type=positive,
         default=1.0,
         metavar="M",
         help="1-sigma error assumed for the coarse DEM (default 1 m)",

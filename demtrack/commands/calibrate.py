@@ -12,7 +12,7 @@ import math
 from typing import TYPE_CHECKING
 
 from .choices import DEFAULT_FREE, FREE_PARAMETERS
-from .common import add_site_argument
+from .common import add_site_argument, non_negative, positive
 
 if TYPE_CHECKING:
     from demtrack.core.camera.gcp_calibration import GcpFit, LeaveOneOut
@@ -249,13 +249,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         choices=("soft_l1", "huber", "cauchy", "arctan", "linear"),
         help="robust loss (default soft_l1)",
     )
-    p.add_argument("--f-scale", type=float, default=1.0, metavar="PX", help="loss scale")
+    p.add_argument("--f-scale", type=positive, default=1.0, metavar="PX", help="loss scale")
     p.add_argument(
-        "--outlier-px", type=float, metavar="PX", help="outlier threshold (default auto)"
+        "--outlier-px", type=positive, metavar="PX", help="outlier threshold (default auto)"
     )
     p.add_argument("--keep-outliers", action="store_true", help="flag but do not exclude")
     p.add_argument(
-        "--grazing-deg", type=float, default=5.0, metavar="DEG", help="grazing-ray threshold"
+        "--grazing-deg", type=non_negative, default=5.0, metavar="DEG", help="grazing-ray threshold"
     )
     p.add_argument("--dry-run", action="store_true", help="report only; leave site.json")
     p.add_argument("--json", action="store_true", help="print JSON")
@@ -266,7 +266,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sensor", required=True, metavar="ID")
     p.add_argument(
         "--threshold",
-        type=float,
+        type=positive,
         default=1.0,
         metavar="DEG",
         help="residual above which a landmark is an outlier (default 1 deg)",

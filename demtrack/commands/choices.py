@@ -17,6 +17,7 @@ __all__ = [
     "GEOLOCATE_RULES",
     "MANIFEST",
     "SCENARIO_DEFAULTS",
+    "REPLAY_NAMES",
     "SCENARIO_NAMES",
     "TRACKING_METHODS",
 ]
@@ -59,6 +60,8 @@ ACTIVITY_CASE_NAMES: tuple[str, ...] = (
     "convoy-uneven",
     "convoy-short",
 )
+#: What ``--replay`` takes: ``demtrack.samplesite.replay_source.SAMPLE_SCENARIOS.names``.
+REPLAY_NAMES: tuple[str, ...] = (*SCENARIO_NAMES, *sorted(ACTIVITY_CASE_NAMES))
 #: ``demtrack.samplesite.activity_scenarios.DEFAULT_ACTIVITY_PARAMS.seed``.
 ACTIVITY_SEED = 0
 

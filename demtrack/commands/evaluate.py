@@ -18,7 +18,15 @@ if TYPE_CHECKING:
     from demtrack.core.site.folder import Site
     from demtrack.core.tracking import Track, TrackerConfig, TrackingMetrics, TruthPath
 
-__all__ = ["format_table", "plot_tracks", "register", "tracking_config"]
+__all__ = [
+    "SERVER_BATCHES",
+    "STUB_S",
+    "format_table",
+    "n_stubs",
+    "plot_tracks",
+    "register",
+    "tracking_config",
+]
 
 
 def tracking_config(vehicle_coast_s: float = 4.0, human_coast_s: float = 4.0) -> TrackerConfig:
@@ -41,18 +49,37 @@ def tracking_config(vehicle_coast_s: float = 4.0, human_coast_s: float = 4.0) ->
     )
 
 
-def format_table(rows: Sequence[tuple[str, TrackingMetrics]]) -> str:
-    """The metrics per method as a Markdown table."""
+#: A track spanning less than this from first to last point is a stub (s).
+STUB_S = 5.0
+
+#: The live server's batches in scenario seconds: the replay's 0.1 s wall-time batch
+#: interval (``DEMTRACK_REPLAY_BATCH_S``) at 1x and at 10x.
+SERVER_BATCHES: tuple[tuple[str, float], ...] = (("1x", 0.1), ("10x", 1.0))
+
+
+def n_stubs(tracks: Sequence[Track], min_s: float = STUB_S) -> int:
+    """How many ``tracks`` span less than ``min_s`` seconds."""
+    return sum(1 for t in tracks if t.points and t.points[-1].t_s - t.points[0].t_s < min_s)
+
+
+def format_table(rows: Sequence[tuple[str, TrackingMetrics, int, int | None]]) -> str:
+    """The metrics per method as a Markdown table.
+
+    Each row: ``(name, metrics, stubs, ended early)``; stubs are tracks shorter than
+    :data:`STUB_S`; "ended early" (the server's rows only, else None) counts tracks the
+    stream announced ended that later went on.
+    """
     head = (
         "| method | RMSE (m) | p95 (m) | jumps > 3 m | points | ID switches | fragmentation"
-        " | tracks (false) | OSPA (m) | GOSPA (m) |\n"
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        f" | tracks (false) | stubs < {STUB_S:g} s | ended early | OSPA (m) | GOSPA (m) |\n"
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
     )
     lines = [head]
-    for name, m in rows:
+    for name, m, stubs, early in rows:
         lines.append(
             f"| {name} | {m.rmse_m:.2f} | {m.p95_m:.2f} | {m.n_jumps} | {m.n_points}"
             f" | {m.id_switches} | {m.fragmentation} | {m.n_tracks} ({m.n_false_tracks})"
+            f" | {stubs} | {'-' if early is None else early}"
             f" | {m.ospa_m:.2f} | {m.gospa_m:.2f} |"
         )
     return "\n".join(lines)
@@ -129,11 +156,25 @@ def _run(args: argparse.Namespace) -> int:
     print(f"{sc.name}: {len(sc.detections)} detections; {report.summary()}")
     config = tracking_config()
     results = []
+    rows: list[tuple[str, TrackingMetrics, int, int | None]] = []
     for name in methods:
         roads = site.roads if name != "raw-first" else None
         tracks = run_tracker(fixes, name, roads=roads, config=config)
-        results.append((name, tracks, evaluate(tracks, sc.truths)))
-    print(format_table([(n, m) for n, _, m in results]))
+        m = evaluate(tracks, sc.truths)
+        results.append((name, tracks, m))
+        rows.append((name, m, n_stubs(tracks), None))
+    if args.server_method != "none":
+        from demtrack.server.ingest.offline_replay import early_ended, replay_detections
+
+        for speed, batch_s in SERVER_BATCHES:
+            live = replay_detections(
+                site, sc.detections, method=args.server_method, batch_s=batch_s
+            )
+            name = f"server {speed} ({args.server_method})"
+            m = evaluate(live.tracks, sc.truths)
+            results.append((name, list(live.tracks), m))
+            rows.append((name, m, n_stubs(live.tracks), len(early_ended(live))))
+    print(format_table(rows))
     if args.plot is not None:
         plot_tracks(args.plot, site, sc.truths, results, sc.name)
         print(f"plot -> {args.plot}")
@@ -147,5 +188,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scenario", required=True, choices=SCENARIO_NAMES, help="scenario")
     p.add_argument("--methods", nargs="+", metavar="M", help="methods (default: all)")
     p.add_argument("--plot", metavar="PNG", help="write a plot of truth against tracks")
+    p.add_argument(
+        "--server-method",
+        choices=(*TRACKING_METHODS, "none"),
+        default="kalman",
+        help="also score the live server's tracks: the detections through its ingest"
+        " pipeline at 1x and 10x batching, with this method (default kalman, the server's;"
+        " none: skip)",
+    )
     add_scenario_parameters(p)
     p.set_defaults(func=_run)

@@ -8,7 +8,7 @@ import json
 from typing import TYPE_CHECKING
 
 from .choices import ACTIVITY_CASE_NAMES, ACTIVITY_SEED, DEFAULT_METHOD, TRACKING_METHODS
-from .common import add_site_argument
+from .common import add_site_argument, non_negative_int
 
 if TYPE_CHECKING:
     from demtrack.samplesite.activity_eval import CaseResult, DetectorScore
@@ -111,6 +111,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="run the detectors on the true paths instead of tracks",
     )
-    p.add_argument("--seed", type=int, default=ACTIVITY_SEED, help="random seed (default 0)")
+    p.add_argument(
+        "--seed", type=non_negative_int, default=ACTIVITY_SEED, help="random seed (default 0)"
+    )
     p.add_argument("--json", action="store_true", help="print scores and events as JSON")
     p.set_defaults(func=_run)

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from .choices import DEFAULT_METHOD, TRACKING_METHODS
-from .common import add_site_argument
+from .common import add_site_argument, positive
 
 __all__ = ["register"]
 
@@ -86,7 +86,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--max-range",
-        type=float,
+        type=positive,
         default=1000.0,
         metavar="M",
         help="cameras see no further than this (default 1000 m)",

@@ -7,7 +7,7 @@ import json
 from typing import TYPE_CHECKING
 
 from .choices import GEOLOCATE_RULES
-from .common import add_site_argument
+from .common import add_site_argument, any_number, positive
 
 if TYPE_CHECKING:
     from demtrack.core.geolocation.geolocate import Geolocation, GroundHit
@@ -63,14 +63,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--pixel",
         required=True,
         nargs=2,
-        type=float,
+        type=any_number,  # the command says a NaN or far pixel is outside the image
         metavar=("U", "V"),
         help="column and row; (0, 0) is the centre of the top-left pixel",
     )
     p.add_argument("--rule", choices=GEOLOCATE_RULES, default="all", help="which hit(s) to report")
     p.add_argument(
         "--pixel-sigma",
-        type=float,
+        type=positive,
         default=1.0,
         metavar="PX",
         help="1-sigma pixel error for the uncertainty (default 1)",

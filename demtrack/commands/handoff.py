@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from .common import add_site_argument
+from .common import add_site_argument, positive
 
 __all__ = ["register"]
 
@@ -57,7 +57,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scenario", help="a sample-site scenario (default: all)")
     p.add_argument(
         "--lead",
-        type=float,
+        type=positive,
         default=2.0,
         metavar="S",
         help="how long before the exit the prediction is made (default 2 s)",

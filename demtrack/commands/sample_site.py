@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .choices import MANIFEST
-from .common import DEFAULT_SITE
+from .common import DEFAULT_SITE, port
 from .geolocate import print_geolocation
 from .serve import add_live_arguments, live_overrides, serve_app
 
@@ -28,7 +28,9 @@ if TYPE_CHECKING:
 __all__ = ["DEMO_SCENARIOS", "ensure_sample_site", "register"]
 
 #: What ``demtrack demo`` replays by default: a car on the roads, people on the field.
-DEMO_SCENARIOS = ["vehicle-run", "pedestrians"]
+#: The demo's default replay: the paper's vehicle run, pedestrians, and one case of each
+#: activity detector (loitering, rendezvous, convoy), so every detector shows in the first loop.
+DEMO_SCENARIOS = ["vehicle-run", "pedestrians", "loitering", "rendezvous", "convoy"]
 
 
 def ensure_sample_site(path: Path, *, rebuild: bool = False, warmers: Any = None) -> Path:
@@ -162,7 +164,7 @@ def _serve_demo(
 ) -> int:
     from demtrack.samplesite.kernel_warmup import TRACKER_JOBS
     from demtrack.samplesite.replay_source import SAMPLE_SCENARIOS
-    from demtrack.server.app import create_app
+    from demtrack.server.app import check_startup, create_app
     from demtrack.server.scene3d import display_host
 
     db = args.db if args.db is not None else site_dir / "demo.sqlite3"
@@ -175,6 +177,7 @@ def _serve_demo(
         **live,
     }
     app = create_app(scenarios=SAMPLE_SCENARIOS, **overrides)
+    check_startup(app)  # a broken site or database: one line and exit 2, not a traceback
     if server_warmer is not None:
         app.state.warm_after = server_warmer.wait
         # The replay starts once the tracker's kernels are in numba's cache: on a cold
@@ -248,7 +251,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--site", type=Path, default=DEFAULT_SITE, metavar="DIR")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=8000, help="port (default 8000; 0 = any free)")
+    p.add_argument("--port", type=port, default=8000, help="port (default 8000; 0 = any free)")
     add_live_arguments(p, replay_default=DEMO_SCENARIOS)
     p.add_argument("--no-3d", action="store_true", help="do not serve the viser 3D scene")
     p.add_argument(

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 from demtrack.core.errors import InputFileError
 
 from .choices import SCENARIO_DEFAULTS, SCENARIO_NAMES
-from .common import add_site_argument
+from .common import add_site_argument, non_negative, non_negative_int, probability
 
 if TYPE_CHECKING:
     from demtrack.samplesite.scenarios import ScenarioParams
@@ -23,26 +23,28 @@ def add_scenario_parameters(p: argparse.ArgumentParser) -> None:
     d = SimpleNamespace(**SCENARIO_DEFAULTS)  # ScenarioParams' defaults, without its imports
     p.add_argument(
         "--noise-px",
-        type=float,
+        type=non_negative,
         default=d.noise_px,
         metavar="PX",
         help=f"1-sigma box-edge noise (default {d.noise_px})",
     )
     p.add_argument(
         "--p-miss",
-        type=float,
+        type=probability,
         default=d.p_miss,
         metavar="P",
         help=f"missed-detection probability (default {d.p_miss})",
     )
     p.add_argument(
         "--false-alarms",
-        type=float,
+        type=non_negative,
         default=d.false_alarm_rate,
         metavar="RATE",
         help=f"mean false alarms per camera frame (default {d.false_alarm_rate})",
     )
-    p.add_argument("--seed", type=int, default=d.seed, help=f"random seed (default {d.seed})")
+    p.add_argument(
+        "--seed", type=non_negative_int, default=d.seed, help=f"random seed (default {d.seed})"
+    )
 
 
 def params_from_args(args: argparse.Namespace) -> ScenarioParams:

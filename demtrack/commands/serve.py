@@ -11,8 +11,8 @@ from typing import Any
 
 from demtrack.server.gc_tuning import SERVER_GC_THRESHOLDS, tune_gc_for_serving
 
-from .choices import SCENARIO_NAMES
-from .common import DEFAULT_SITE
+from .choices import REPLAY_NAMES
+from .common import DEFAULT_SITE, port
 
 __all__ = [
     "SERVER_GC_THRESHOLDS",
@@ -63,6 +63,10 @@ def serve_app(
         ws_per_message_deflate=settings.ws_compression,
         timeout_graceful_shutdown=5,
     )
+    # uvicorn.Config has just (re)configured logging: keep ?token=... out of its lines.
+    from demtrack.server.security import install_log_redaction
+
+    install_log_redaction()
     server = uvicorn.Server(config)
     done = threading.Event()
 
@@ -101,22 +105,22 @@ def add_live_arguments(p: argparse.ArgumentParser, *, replay_default: list[str])
     p.add_argument(
         "--replay",
         action="append",
-        choices=SCENARIO_NAMES,
+        choices=REPLAY_NAMES,
         default=None,
         metavar="SCENARIO",
-        help=f"replay a sample-site scenario live (repeatable: {', '.join(SCENARIO_NAMES)};"
+        help=f"replay a sample-site scenario live (repeatable: {', '.join(REPLAY_NAMES)};"
         f" default {shown})",
     )
     p.add_argument(
         "--speed",
-        type=float,
+        type=float,  # checked in live_overrides, with the option named
         default=1.0,
         metavar="X",
         help="replay speed, times real time (default 1)",
     )
     p.add_argument(
         "--viser-port",
-        type=int,
+        type=int,  # checked in live_overrides, with the option named
         default=8080,
         metavar="PORT",
         help="port of the 3D scene (default 8080, 0 = any free; a busy one moves)",
@@ -144,8 +148,9 @@ def live_overrides(args: argparse.Namespace, replay_default: list[str]) -> dict[
 
 def _run(args: argparse.Namespace) -> int:
     from demtrack.samplesite.replay_source import SAMPLE_SCENARIOS
-    from demtrack.server.app import create_app
+    from demtrack.server.app import check_startup, create_app
 
+    live = live_overrides(args, [])  # checks --speed and --viser-port before any work
     overrides: dict[str, Any] = {}
     if args.site is not None:
         overrides["site"] = args.site
@@ -156,10 +161,11 @@ def _run(args: argparse.Namespace) -> int:
     if args.no_warm_up:
         overrides["warm_up"] = False
     if args.replay:
-        overrides.update(live_overrides(args, []))
+        overrides.update(live)
     if args.scene3d:
         overrides.update(scene3d=True, viser_host=args.host, viser_port=args.viser_port)
     app = create_app(scenarios=SAMPLE_SCENARIOS, **overrides)  # --replay plays the sample's
+    check_startup(app)  # a broken site or database: one line and exit 2, not a traceback
     settings = app.state.settings
     print_token(app)
     print(f"site {settings.site}, database {settings.resolved_db_path}", flush=True)
@@ -188,7 +194,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help=f"site folder (default: $DEMTRACK_SITE, else {DEFAULT_SITE})",
     )
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=8000, help="port (default 8000; 0 = any free)")
+    p.add_argument("--port", type=port, default=8000, help="port (default 8000; 0 = any free)")
     p.add_argument(
         "--db",
         type=Path,

@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING
 
 from demtrack.core.errors import CameraError, SiteError
 
+from .common import non_negative, positive, positive_int
+
 if TYPE_CHECKING:
     from demtrack.core.camera.pinhole import Intrinsics
 
@@ -336,22 +338,24 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--coarse", type=Path, metavar="FILE", help="coarse DEM filling the holes")
     p.add_argument("--geoid-undulation", type=float, metavar="N", help="N (m), new sites")
     p.add_argument("--z-unit", choices=tuple(_Z_UNITS), help="height unit (default: per file)")
-    p.add_argument("--cell", type=float, metavar="M", help="cell size (default: native)")
+    p.add_argument("--cell", type=positive, metavar="M", help="cell size (default: native)")
     p.add_argument("--bounds", type=float, nargs=4, metavar=("XMIN", "YMIN", "XMAX", "YMAX"))
     p.add_argument(
         "--anchor", type=float, nargs=3, metavar=("LAT", "LON", "H"), help="new site's anchor"
     )
     p.add_argument("--name", help="site name (new site)")
-    p.add_argument("--sigma", type=float, default=0.0, metavar="M", help="tiles' 1-sigma (m)")
     p.add_argument(
-        "--coarse-sigma", type=float, default=1.0, metavar="M", help="coarse DEM 1-sigma"
+        "--sigma", type=non_negative, default=0.0, metavar="M", help="tiles' 1-sigma (m)"
+    )
+    p.add_argument(
+        "--coarse-sigma", type=positive, default=1.0, metavar="M", help="coarse DEM 1-sigma"
     )
     p.set_defaults(func=_run_import_dem)
 
     p = sub.add_parser("import-ortho", help="resample an RGB GeoTIFF (any CRS) onto the site")
     _site(p)
     p.add_argument("image", type=Path, metavar="ORTHO.tif")
-    p.add_argument("--cell", type=float, metavar="M", help="cell size (default: native)")
+    p.add_argument("--cell", type=positive, metavar="M", help="cell size (default: native)")
     p.set_defaults(func=_run_import_ortho)
 
     p = sub.add_parser("import-roads", help="road lines from GeoJSON or GeoPackage (any CRS)")
@@ -380,10 +384,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--roll", type=float, default=0.0, metavar="DEG")
     p.add_argument("--pan", type=float, default=0.0, metavar="DEG", help="head pan reading")
     p.add_argument("--intrinsics", metavar="FILE.json")
-    for key in ("fx", "fy", "cx", "cy"):
-        p.add_argument(f"--{key}", type=float)
-    p.add_argument("--width", type=int)
-    p.add_argument("--height", type=int)
+    for key in ("fx", "fy"):
+        p.add_argument(f"--{key}", type=positive, metavar="PX")
+    for key in ("cx", "cy"):
+        p.add_argument(f"--{key}", type=float, metavar="PX")
+    p.add_argument("--width", type=positive_int, metavar="PX")
+    p.add_argument("--height", type=positive_int, metavar="PX")
     for key in ("k1", "k2", "p1", "p2", "k3"):
         p.add_argument(f"--{key}", type=float, default=0.0)
     p.add_argument("--image", metavar="FILE", help="a still from the camera")

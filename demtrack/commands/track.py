@@ -1,4 +1,9 @@
-"""``demtrack track``: detections -> geolocated fixes -> tracks (GeoJSON, CSV, GPX, KML, GPKG)."""
+"""``demtrack track``: detections -> fixes -> tracks (GeoJSON, CSV, GPX, KML, KMZ, GPKG).
+
+The files are written by :mod:`demtrack.core.io.track_io`, the writers the server's
+``/api/tracks/export`` uses: same heights (the site's geoid model, else ellipsoidal and
+said so) and times (``--epoch`` + t_s, else the UNIX epoch, declared in the file).
+"""
 
 from __future__ import annotations
 
@@ -18,7 +23,7 @@ if TYPE_CHECKING:
 
 __all__ = ["DEFAULT_METHOD", "register", "track_detections"]
 
-SUFFIXES = (".geojson", ".json", ".csv", ".gpx", ".kml", ".gpkg")
+SUFFIXES = (".geojson", ".json", ".csv", ".gpx", ".kml", ".kmz", ".gpkg")
 
 
 def _epoch(text: str | None) -> datetime | None:
@@ -50,14 +55,9 @@ def _run(args: argparse.Namespace) -> int:
     if suffix not in SUFFIXES:
         raise InputFileError(f"unknown track file type {suffix!r} (use {', '.join(SUFFIXES)})")
     epoch = _epoch(args.epoch)
-    from demtrack.core.io.track_io import (
-        write_tracks_csv,
-        write_tracks_geojson,
-        write_tracks_gpkg,
-        write_tracks_gpx,
-        write_tracks_kml,
-    )
+    from demtrack.core.io.track_io import TRACK_CSVT, UNIX_EPOCH, TimeBase, write_tracks
     from demtrack.core.site.folder import load_site
+    from demtrack.server.track_export import site_heights
 
     site = load_site(args.site)
     tracks = track_detections(site, args.detections, args.method)
@@ -67,17 +67,13 @@ def _run(args: argparse.Namespace) -> int:
         lat, lon, h = frame.to_geodetic(e, n, u)
         return float(lat), float(lon), float(h)
 
-    if suffix == ".csv":
-        write_tracks_csv(out, tracks, to_geodetic, epoch=epoch)
-    elif suffix == ".gpx":
-        # GPX needs absolute times: without --epoch, t = 0 is the start of 2000-01-01 UTC.
-        write_tracks_gpx(out, tracks, to_geodetic, epoch=epoch or datetime(2000, 1, 1, tzinfo=UTC))
-    elif suffix == ".kml":
-        write_tracks_kml(out, tracks, to_geodetic, epoch=epoch)
-    elif suffix == ".gpkg":
-        write_tracks_gpkg(out, tracks, to_geodetic, epoch=epoch)
-    else:
-        write_tracks_geojson(out, tracks, to_geodetic, epoch=epoch)
+    fmt = "geojson" if suffix == ".json" else suffix[1:]
+    times = TimeBase(epoch or UNIX_EPOCH)
+    heights = site_heights(site)  # the server's rule: EGM96, else the site's N, else none
+    write_tracks(fmt, out, tracks, to_geodetic, times=times, heights=heights)
+    if fmt == "csv":
+        # GDAL's column types for the CSV, beside it (ogr reads x.csvt with x.csv).
+        out.with_suffix(".csvt").write_text(TRACK_CSVT, encoding="utf-8")
     n_gaps = sum(len(t.gaps) for t in tracks)
     print(f"{args.method}: {len(tracks)} track(s), {n_gaps} gap(s) -> {out}")
     return 0
@@ -104,9 +100,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--output",
         required=True,
         metavar="FILE",
-        help="tracks file: .geojson, .csv, .gpx, .kml or .gpkg",
+        help="tracks file: .geojson, .csv (with a .csvt), .gpx, .kml, .kmz or .gpkg",
     )
     p.add_argument(
-        "--epoch", metavar="ISO8601", help="UTC time of t = 0 s, for absolute times in the output"
+        "--epoch",
+        metavar="ISO8601",
+        help="UTC time of t = 0 s, declared in the file (default 1970-01-01T00:00:00Z)",
     )
     p.set_defaults(func=_run)

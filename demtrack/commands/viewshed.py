@@ -10,7 +10,13 @@ from typing import TYPE_CHECKING
 
 from demtrack.core.visibility.target_heights import DEFAULT_TARGET_HEIGHT_M
 
-from .common import add_site_argument
+from .common import (
+    add_site_argument,
+    non_negative,
+    non_negative_int,
+    positive,
+    require_suffix,
+)
 
 if TYPE_CHECKING:
     import numpy as np
@@ -61,6 +67,8 @@ def _run(args: argparse.Namespace) -> int:
     from demtrack.core.site.folder import load_site
     from demtrack.core.visibility.viewshed import blind_spots, viewshed
 
+    if args.output is not None:
+        require_suffix(args.output, (".tif", ".tiff"), "--output")
     site = load_site(args.site)
     ids = args.sensor or list(site.sensors)
     sensors = [site.sensor(s) for s in ids]
@@ -114,7 +122,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--target-height",
-        type=float,
+        type=non_negative,
         default=DEFAULT_TARGET_HEIGHT_M,
         metavar="M",
         help=(
@@ -122,7 +130,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             " a car is 1.5 m)"
         ),
     )
-    p.add_argument("--max-range", type=float, default=1000.0, metavar="M")
+    p.add_argument("--max-range", type=positive, default=1000.0, metavar="M")
     p.add_argument(
         "--method",
         choices=("sweep", "exact"),
@@ -132,11 +140,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--curvature", action="store_true", help="earth curvature and refraction")
     p.add_argument(
         "--min-area",
-        type=float,
+        type=non_negative,
         default=25.0,
         metavar="M2",
         help="smallest blind spot listed (default 25 m2)",
     )
-    p.add_argument("--blind-spots", type=int, default=5, metavar="N", help="how many to print")
+    p.add_argument(
+        "--blind-spots", type=non_negative_int, default=5, metavar="N", help="how many to print"
+    )
     p.add_argument("-o", "--output", type=Path, metavar="COVERAGE.tif")
     p.set_defaults(func=_run)

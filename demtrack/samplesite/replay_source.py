@@ -12,6 +12,7 @@ from dataclasses import dataclass, replace
 
 from demtrack.core.site.folder import Site
 
+from .activity_scenarios import ACTIVITY_CASES, DEFAULT_ACTIVITY_PARAMS, make_activity_scenario
 from .scenarios import SCENARIOS, Scenario, ScenarioParams, make_scenario
 
 __all__ = ["SAMPLE_SCENARIOS", "SampleScenarios"]
@@ -19,12 +20,17 @@ __all__ = ["SAMPLE_SCENARIOS", "SampleScenarios"]
 
 @dataclass(frozen=True)
 class SampleScenarios:
-    """The generated sample site's scenarios (:data:`~.scenarios.SCENARIOS`), default noise."""
+    """The generated sample site's scenarios, default noise.
+
+    The trajectory scenarios (:data:`~.scenarios.SCENARIOS`) and the activity cases
+    (:data:`~.activity_scenarios.ACTIVITY_CASES`: loitering, rendezvous, convoys, ...), so a
+    live replay can show every activity detector.
+    """
 
     @property
     def names(self) -> tuple[str, ...]:
-        """The scenario names, sorted."""
-        return tuple(sorted(SCENARIOS))
+        """The scenario names: the trajectory scenarios, then the activity cases (sorted)."""
+        return (*sorted(SCENARIOS), *sorted(ACTIVITY_CASES))
 
     @property
     def rate_hz(self) -> float:
@@ -39,6 +45,11 @@ class SampleScenarios:
         SiteError
             Unknown scenario, or a site that is not a generated sample site.
         """
+        if name in ACTIVITY_CASES:
+            params = replace(DEFAULT_ACTIVITY_PARAMS, seed=seed)
+            if rate_hz is not None:
+                params = replace(params, rate_hz=rate_hz)
+            return make_activity_scenario(site, name, params).scenario
         params = ScenarioParams() if rate_hz is None else ScenarioParams(rate_hz=rate_hz)
         return make_scenario(site, name, replace(params, seed=seed))
 

@@ -17,6 +17,7 @@ from ..state import ConsoleState
 __all__ = [
     "OPERATOR",
     "READER",
+    "SQLITE_INT_MAX",
     "BBoxQuery",
     "StateDep",
     "TimeFrom",
@@ -27,8 +28,11 @@ __all__ = [
 ]
 
 
-def get_state(request: Request) -> ConsoleState:
-    """The app's :class:`ConsoleState` (built in the lifespan)."""
+async def get_state(request: Request) -> ConsoleState:
+    """The app's :class:`ConsoleState` (built in the lifespan).
+
+    ``async``: a plain ``def`` dependency would take a worker thread for each request.
+    """
     state: ConsoleState = request.app.state.console
     return state
 
@@ -41,10 +45,12 @@ READER = (Depends(require_reader),)
 #: ``dependencies=`` of the write endpoints (always the operator token).
 OPERATOR = (Depends(require_operator),)
 
+#: The largest integer SQLite stores: every id a query takes is bounded by it (a larger
+#: one raised ``OverflowError`` in the driver, an HTTP 500).
+SQLITE_INT_MAX = 2**63 - 1
+
 #: Start of a time window (session seconds, inclusive).
-TimeFrom = Annotated[
-    float | None, Query(description="window start (s)", allow_inf_nan=False)
-]
+TimeFrom = Annotated[float | None, Query(description="window start (s)", allow_inf_nan=False)]
 #: End of a time window (session seconds, inclusive).
 TimeTo = Annotated[float | None, Query(description="window end (s)", allow_inf_nan=False)]
 #: A track class filter (``?class=``).

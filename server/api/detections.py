@@ -11,7 +11,8 @@ from starlette.responses import Response
 from .. import listing
 from ..json_response import json_response
 from ..models import DetectionBatch, IngestAck, StoredDetectionOut
-from .deps import OPERATOR, READER, StateDep
+from .deps import OPERATOR, READER, SQLITE_INT_MAX, StateDep
+from .errors import error_responses
 
 __all__ = ["router"]
 
@@ -22,6 +23,7 @@ router = APIRouter(prefix="/api/detections", tags=["detections"])
     "",
     response_model=IngestAck,
     dependencies=OPERATOR,
+    responses=error_responses(401, 413, 422, 503, 507),
     summary="Ingest a batch of detections",
 )
 async def ingest(batch: DetectionBatch, state: StateDep) -> dict[str, Any]:
@@ -41,11 +43,12 @@ async def ingest(batch: DetectionBatch, state: StateDep) -> dict[str, Any]:
     "",
     response_model=list[StoredDetectionOut],
     dependencies=READER,
+    responses=error_responses(401, 404, 422),
     summary="Stored detections",
 )
 def list_detections(
     state: StateDep,
-    after_id: int = Query(0, ge=0, description="only ids above this"),
+    after_id: int = Query(0, ge=0, le=SQLITE_INT_MAX, description="only ids above this"),
     limit: int = Query(1000, ge=1, le=10_000),
     t_from: float | None = Query(
         None, allow_inf_nan=False, description="only detections at or after this time (s)"

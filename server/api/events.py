@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any, Literal
 
 from fastapi import APIRouter, Query
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, Field
 
 from .. import listing
 from ..listing import EVENT_KINDS
@@ -28,7 +28,11 @@ Kind = Literal[
 ]
 
 
-_KIND = Query(None, description="only these kinds (repeat the parameter)")
+_KIND = Query(
+    None,
+    description="only these kinds (repeat the parameter); default every kind but handoff",
+)
+_SENSOR = Query(None, description="only events one of these sensors saw (repeat)")
 
 
 class EventsOut(BaseModel):
@@ -37,6 +41,9 @@ class EventsOut(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     events: list[EventBody]
+    next_offset: int | None = Field(
+        None, description="the offset of the next page; null when this is the last"
+    )
 
 
 @router.get("", response_model=EventsOut, summary="Detected events")
@@ -47,12 +54,18 @@ def list_events(
     kind: list[Kind] | None = _KIND,
     track: int | None = Query(None, ge=0, description="only events involving this track"),
     open_only: bool = Query(False, alias="open", description="only episodes still going on"),
+    sensor: list[str] | None = _SENSOR,
     limit: int = Query(1000, ge=1, le=10_000),
+    offset: int = Query(0, ge=0, le=10_000_000, description="rows to skip (paging)"),
 ) -> dict[str, Any]:
     """Stored events whose ``[t_start_s, t_end_s]`` overlaps the window.
 
-    Loitering, rendezvous and convoy episodes, zone entries and exits, hand-off
-    predictions (``t_end_s`` = predicted exit time) and tracks confirmed / ended.
+    What happened: loitering, rendezvous and convoy episodes, zone entries and exits,
+    tracks confirmed / ended. Hand-off predictions (``kind=handoff``: one per track, the
+    newest, ``t_end_s`` = predicted exit time) only when asked for. Pages of ``limit``
+    rows: ask again with ``offset=next_offset``.
     """
-    rows = listing.list_events(state, t_from, t_to, kind, track, open_only, limit)
-    return {"events": rows}
+    rows, nxt = listing.list_events(
+        state, t_from, t_to, kind, track, open_only, limit, sensor, offset
+    )
+    return {"events": rows, "next_offset": nxt}

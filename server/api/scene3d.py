@@ -5,6 +5,11 @@ the selection is cleared); the viser scene then points the cameras of that conso
 viser clients (its follow ``session``) at the track's newest position and keeps following
 it (:meth:`Scene3D.follow`). Without a session the choice is the broadcast one: every 3D
 client follows the same track (and the sessions' own choices are dropped).
+
+``PUT /api/scene3d/session`` (operator token) admits a page's follow session into the
+scene: the viser server closes every WebSocket whose path names no admitted session
+before it sends anything (``server/scene3d/connections.py``), so the 3D view needs the
+operator token as the console does. A ``PUT /follow`` with a session admits it too.
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ from ..scene3d import FOLLOW_PATH, SESSION_PATTERN
 from ..track_query import stored_track
 from .deps import OPERATOR, READER, StateDep
 
-__all__ = ["FollowIn", "FollowOut", "router"]
+__all__ = ["FollowIn", "FollowOut", "SessionIn", "SessionOut", "router"]
 
 router = APIRouter(prefix="/api/scene3d", tags=["scene3d"])
 
@@ -63,6 +68,25 @@ class FollowOut(BaseModel):
     clients: list[ClientCamera]
 
 
+class SessionIn(BaseModel):
+    """A console page's follow session, to admit into the 3D scene."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    session: str = Field(
+        ...,
+        pattern=SESSION_PATTERN,
+        description=f"the page's random id; its viser client connects on `{FOLLOW_PATH}<session>`",
+    )
+
+
+class SessionOut(BaseModel):
+    """The admitted session and where its viser client connects."""
+
+    session: str
+    websocket_path: str = Field(description="the WebSocket path the viser client must use")
+
+
 SessionQuery = Annotated[
     str | None,
     Query(pattern=SESSION_PATTERN, description="a follow session (see PUT); omitted: all"),
@@ -74,6 +98,21 @@ def _scene(request: Request) -> Any:
     if scene is None:
         raise NotFoundError("the 3D scene is not running (start the server with --3d)")
     return scene
+
+
+@router.put(
+    "/session",
+    response_model=SessionOut,
+    dependencies=OPERATOR,
+    summary="Admit a console page's viser client into the 3D scene",
+)
+def put_session(body: SessionIn, request: Request) -> dict[str, Any]:
+    """Let the viser clients that connect on ``/follow/<session>`` see the scene.
+
+    Without it the scene closes their WebSocket (code 4401) before sending anything.
+    """
+    _scene(request).admit(body.session)
+    return {"session": body.session, "websocket_path": f"{FOLLOW_PATH}{body.session}"}
 
 
 @router.get(
@@ -107,6 +146,8 @@ async def put_follow(body: FollowIn, request: Request, state: StateDep) -> dict[
     """
     scene = _scene(request)
     track = None if body.track_id is None else stored_track(state, body.track_id)
+    if body.session is not None:
+        scene.admit(body.session)
     scene.follow(body.track_id, track, session=body.session)
     await run_in_threadpool(scene.flush, 2.0)
     out: dict[str, Any] = scene.follow_state(body.session)

@@ -1,12 +1,13 @@
 """``/api/tracks``: the tracker's tracks with time-window, class, sensor and box filters.
 
-``/api/tracks/export?format=geojson|csv|gpx|kml|gpkg`` writes the same selection with the
-writers of :mod:`demtrack.core.io.track_io` (the ``demtrack track`` CLI's formats).
+``/api/tracks/export?format=geojson|csv|gpx|kml|kmz|gpkg`` writes the same selection with
+the one writer per format of :mod:`demtrack.core.io.track_io` (which ``demtrack track -o``
+and the console's export menu use too).
 """
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query
 from fastapi.responses import Response
@@ -14,7 +15,7 @@ from starlette.concurrency import run_in_threadpool
 
 from ..json_response import json_response
 from ..models import TracksOut
-from ..track_export import EXPORT_TYPES, export_bytes, parse_epoch
+from ..track_export import EXPORT_TYPES, export_bytes, parse_epoch, site_heights, time_base
 from ..track_query import filter_tracks, stored_track
 from .deps import BBoxQuery, StateDep, TimeFrom, TimeTo, TrackClass, TrackSensor
 
@@ -55,7 +56,7 @@ def list_tracks(
 )
 async def export_tracks(
     state: StateDep,
-    format: Literal["geojson", "csv", "gpx", "kml", "gpkg"] = Query(
+    format: Literal["geojson", "csv", "gpx", "kml", "kmz", "gpkg"] = Query(
         "geojson", description="file format"
     ),
     t_from: TimeFrom = None,
@@ -63,21 +64,36 @@ async def export_tracks(
     cls: TrackClass = None,
     sensor: TrackSensor = None,
     bbox: BBoxQuery = None,
+    track: Annotated[
+        list[int] | None,
+        Query(max_length=10_000, description="only these track ids (repeat the parameter)"),
+    ] = None,
     epoch: str | None = Query(
         None,
         max_length=64,
-        description="ISO 8601 UTC time of t = 0 s (default 2000-01-01T00:00:00Z)",
+        description="ISO 8601 UTC time of t = 0 s, declared in the file"
+        " (default 1970-01-01T00:00:00Z: t_s read as UNIX seconds)",
     ),
 ) -> Response:
     """The tracks ``GET /api/tracks`` lists for the same filters, as a file.
 
-    GeoJSON (RFC 7946, lon/lat/h), CSV (one row per point), GPX 1.1 (a segment per run
-    between gaps), KML 2.2 (a LineString per run; lon,lat,alt) or GeoPackage (layers
-    ``tracks`` and ``track_points``, EPSG:4326). Heights are above the WGS84 ellipsoid.
+    GeoJSON (RFC 7946, MultiLineString of lon/lat/h, h ellipsoidal), CSV (one row per
+    point, ``longitude``/``latitude``), GPX 1.1 (a segment per run between gaps, ``<time>``
+    and ``<ele>``), KML 2.2 / KMZ (a ``gx:Track`` per run, ``absolute`` altitudes) or
+    GeoPackage (layers ``tracks`` and ``track_points``, EPSG:4979, R-tree index). Sea-level
+    heights (KML, GPX ``ele``) use the site's geoid model; without one they are the
+    ellipsoidal heights, and the file says so. Times are ``epoch + t_s``, the epoch declared
+    in the file.
     """
-    when = parse_epoch(epoch)
+    when = time_base(parse_epoch(epoch))
     bodies = filter_tracks(state, t_from, t_to, cls, sensor, bbox)
-    data = await run_in_threadpool(export_bytes, format, bodies, state.site.frame, when)
+    if track is not None:
+        wanted = set(track)
+        bodies = [b for b in bodies if b["id"] in wanted]
+    heights = site_heights(state.site)
+    data = await run_in_threadpool(
+        export_bytes, format, bodies, state.site.frame, when, heights
+    )
     media, suffix = EXPORT_TYPES[format]
     return Response(
         data,

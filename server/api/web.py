@@ -49,7 +49,7 @@ def _file(path: Path, root: Path) -> FileResponse:
     """``path`` if it is a plain file under ``root`` with a served suffix, else HTTP 404."""
     try:
         real = path.resolve(strict=True)
-    except (OSError, RuntimeError):
+    except (OSError, RuntimeError, ValueError):  # ValueError: a NUL byte in the name
         raise HTTPException(404, "no such console file") from None
     media = _TYPES.get(real.suffix.lower())
     if media is None or not real.is_relative_to(root.resolve()) or not real.is_file():
@@ -66,7 +66,12 @@ def index() -> FileResponse:
 @router.get("/console/{name:path}", include_in_schema=False)
 def console_file(name: str) -> FileResponse:
     """One of the console's own scripts or styles."""
-    if not name or "\\" in name or any(p in ("", ".", "..") for p in name.split("/")):
+    if (
+        not name
+        or "\\" in name
+        or "\x00" in name
+        or any(p in ("", ".", "..") for p in name.split("/"))
+    ):
         raise HTTPException(404, "no such console file")
     return _file(_APP_DIR / name, _APP_DIR)
 

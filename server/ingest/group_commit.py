@@ -3,7 +3,9 @@
 Batches that arrive while the pipeline's lock is held wait together; the next one to get
 the lock commits all of them in one transaction and processes them as one, in arrival
 order - each keeps its own batch row, acknowledgement and ``ingest`` message. If the
-transaction fails, nothing is committed and every batch of the group fails with it.
+transaction fails, nothing of it is committed; the pipeline then commits each batch of the
+group on its own, so only the batch that fails is refused (one client's bad batch never
+fails another's).
 """
 
 from __future__ import annotations

@@ -35,6 +35,7 @@ from demtrack.core.tracking.types import Detection, Fix, Track
 from ..live_events import LiveEventParams, LiveEvents
 from ..store.database import Store
 from ..store.derived import FixRow
+from ..store.integrity import StoreUnavailableError
 from .events import event_message, ingest_message
 from .fix_codec import fix_bodies, fixes_from_bodies
 from .group_commit import Ack, GroupCommit, Request, commit_group
@@ -254,23 +255,64 @@ class Pipeline:
             self._n_det[d.sensor] = self._n_det.get(d.sensor, 0) + 1
         return dets, ack
 
-    def _ingest_group(self, group: list[Request]) -> None:
-        """Commit ``group``'s batches in one transaction, then process them (lock held)."""
+    def _commit(self, group: list[Request]) -> tuple[list[tuple[int, Detection]], list[Ack]] | None:
+        """Commit ``group`` in one transaction (:func:`.group_commit.commit_group`).
+
+        On failure nothing is stored, the per-sensor counters are as before and every
+        request of ``group`` carries the error.
+        """
         last_t, n_det = dict(self._last_t), dict(self._n_det)
         out = commit_group(self.store, group, self._accept)
-        if out is None:  # nothing committed: the counters are as before
+        if out is None:
             self._last_t, self._n_det = last_t, n_det
-            return
+            return None
         self.n_commits += 1
         self.n_batches += len(group)
+        return out
+
+    def _ingest_group(self, group: list[Request]) -> None:
+        """Commit ``group``'s batches in one transaction, then process them (lock held).
+
+        If the shared transaction fails, each batch is committed again on its own, in
+        order: one client's bad batch never fails another client's good one. A store that
+        cannot write (full disk, lost file) fails them all at once.
+        """
+        out = self._commit(group)
+        if out is None and len(group) > 1:
+            err = next(r.error for r in group if r.error is not None)
+            if not isinstance(err, StoreUnavailableError):
+                pending: list[tuple[int, Detection]] = []
+                acks: list[Ack] = []
+                for req in group:
+                    req.error = None
+                    one = self._commit([req])
+                    if one is not None:
+                        pending += one[0]
+                        acks += one[1]
+                out = pending, acks
+        if out is None:
+            self._log_refused(group)
+            return
         pending, acks = out
+        self._log_refused([r for r in group if r.error is not None])
         if not acks:
             return
         try:
             self._process(pending, acks=acks)
+        except StoreUnavailableError as exc:  # durable batches; start-up replays them
+            log.error("processing after commit stopped: %s", exc)
         except Exception:  # the batches are durable; start-up replays what failed here
             ids = ", ".join(str(a["batch_id"]) for a, _ in acks)
             log.exception("processing batch(es) %s failed after commit", ids)
+
+    @staticmethod
+    def _log_refused(group: Sequence[Request]) -> None:
+        """One line per batch refused: a store that cannot write is not a traceback."""
+        for req in group:
+            if isinstance(req.error, StoreUnavailableError):
+                log.error("ingest batch refused: %s", req.error)
+            elif req.error is not None:
+                log.error("ingest batch failed: %r", req.error, exc_info=req.error)
 
     # -------------------------------------------------------------- processing
     def _drop_ended(self) -> list[int]:
@@ -318,14 +360,11 @@ class Pipeline:
                 self.n_late += 1
             rows.append((det_id, d.t_s, d.sensor, d.cls, "fix", body))
             events.append(("fix", FixPayload(body)))
+        released_before = self.feed.released_t
         self.feed.release()
         live_now = self.tracker.tracks(include_ended=False)
         live_ids = {t.id for t in live_now}
-        ended_ids = self.bodies.live_ids - live_ids
-        changed = live_now
-        if ended_ids:  # rare: read the ended tracks' final form once
-            recent = self.tracker.tracks(ended_after_s=self.bodies.sent_since(ended_ids))
-            changed = [t for t in recent if t.id in ended_ids] + live_now
+        changed = self._ended_since(released_before, live_ids) + live_now
         track_rows, track_events = self._track_changes(
             changed, live_ids=live_ids, also_geodetic=unfilled
         )
@@ -333,7 +372,7 @@ class Pipeline:
         activity = [p.event for _, p in track_events if isinstance(p, EventPayload)]
         released_t = self.feed.released_t
         if self.live_events is not None and math.isfinite(released_t):
-            if self.live_events.due(released_t):
+            if self._events_due(released_t):
                 window = released_t - self.live_events.params.window_s
                 found = self.live_events.evaluate(
                     self._window_tracks(window), self.bodies.live_ids, released_t
@@ -352,6 +391,43 @@ class Pipeline:
             self.store, self.publish, rows, track_rows, events, activity, self.bodies.stored
         )
         self._drop_ended()  # after their final rows are stored
+
+    def _ended_since(self, released_before: float, live_ids: set[int]) -> list[Track]:
+        """Ended tracks this release may have changed: live at the last batch, or new.
+
+        A track can be confirmed and end within one release (a batch holding its whole
+        life, or an ended track taken up again and ended again): it was never live at a
+        batch's end, yet a restart's replay stores it, so it is stored and sent now too.
+        Every fix the tracker processed in this release is at most ``step_window_s`` older
+        than the newest one released before it (older ones were processed then), so such
+        a track's newest point is after that.
+        """
+        ended_ids = self.bodies.live_ids - live_ids
+        horizon = released_before - float(getattr(self.tracker.config, "step_window_s", 0.0))
+        if ended_ids:  # rare: read the ended tracks' final form once
+            horizon = min(horizon, self.bodies.sent_since(ended_ids))
+        # unchanged ones among them are skipped by ``TrackBodies.changes`` (same signature)
+        return [t for t in self.tracker.tracks(ended_after_s=horizon) if t.id not in live_ids]
+
+    def _events_due(self, released_t: float) -> bool:
+        """Whether the live events run now: once per ``every_s`` cell of scenario time.
+
+        The first batch whose released time enters a new cell of ``every_s`` (counted from
+        0) runs them. A restart knows where that schedule stands from the replayed
+        released time alone (the last run was in its cell), so it evaluates at the very
+        batches an uninterrupted run does; a schedule counted from the last run's time
+        (``LiveEvents.due``) drifted after a restart, and its events with it.
+        """
+        events = self.live_events
+        if events is None:
+            return False
+        last = events.last_eval_t
+        if last is None:
+            return True
+        every = events.params.every_s
+        if every <= 0:
+            return True
+        return math.floor(released_t / every) > math.floor(last / every)
 
     def _window_tracks(self, t_from: float) -> list[Track]:
         """Tracks with a point at or after ``t_from`` (live ones and recently ended)."""

@@ -19,7 +19,7 @@ from .following import FOLLOW_OFFSET_M, follow_offset
 from .frusta import frustum_fov_aspect, wxyz_from_matrix
 from .geometry import TerrainMesh, polyline_segments, road_polylines, terrain_mesh, texture_uv
 from .scene import Scene3D
-from .style import track_colour
+from .style import class_colour, sensor_colour
 
 __all__ = [
     "FOLLOW_OFFSET_M",
@@ -27,14 +27,15 @@ __all__ = [
     "SESSION_PATTERN",
     "Scene3D",
     "TerrainMesh",
+    "class_colour",
     "display_host",
     "follow_offset",
     "frustum_fov_aspect",
     "polyline_segments",
     "road_polylines",
+    "sensor_colour",
     "session_of_path",
     "terrain_mesh",
     "texture_uv",
-    "track_colour",
     "wxyz_from_matrix",
 ]

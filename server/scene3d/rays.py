@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from .style import sensor_colour
+from .style import HIT_COLOUR, SELECTED_COLOUR, hex_colour, sensor_colour
 
 __all__ = ["RayLayer"]
 
@@ -121,7 +121,7 @@ class RayLayer:
         self.nodes["/rays/hits"] = scene.add_point_cloud(
             "/rays/hits",
             np.concatenate(all_hits).astype(np.float32),
-            (255, 255, 255),
+            hex_colour(HIT_COLOUR),  # as the map's terrain hits
             point_size=1.5,
             point_shape="circle",
             precision="float32",
@@ -130,7 +130,7 @@ class RayLayer:
         self.nodes["/rays/chosen"] = scene.add_point_cloud(
             "/rays/chosen",
             pts,
-            (255, 30, 30),
+            hex_colour(SELECTED_COLOUR),  # as the map's chosen hit
             point_size=3.0,
             point_shape="circle",
             precision="float32",

@@ -24,6 +24,7 @@ from demtrack.core.site.folder import Site
 from .connections import (
     _SESSION_RE,
     SESSION_PATTERN,
+    SessionGate,
     display_host,
     session_of_path,
     websocket_path,
@@ -56,6 +57,9 @@ class Scene3D:
         Largest side of the orthophoto texture (px).
     update_s : float
         Shortest time (s) between two drawing passes.
+    require_session : bool
+        Admit only viser clients whose WebSocket path names a session registered with
+        :meth:`admit` (what the console's operator token buys); False admits every client.
 
     Attributes
     ----------
@@ -76,6 +80,7 @@ class Scene3D:
         mesh_side: int = 250,
         texture_px: int = 2048,
         update_s: float = 0.25,
+        require_session: bool = True,
     ) -> None:
         import viser
 
@@ -88,6 +93,7 @@ class Scene3D:
             self.server = viser.ViserServer(host=host, port=port, label="demtrack", verbose=False)
         self.url = f"http://{display_host(host)}:{self.server.get_port()}/"
         configure_gui(self.server)
+        self.gate = SessionGate(self.server, required=require_session)
         self.nodes: dict[str, Any] = {}
         self.n_messages = 0
         self.n_dropped = 0
@@ -146,6 +152,10 @@ class Scene3D:
         self._following.ask(tid, session)
         self._inbox.append({"type": "_follow", "track_id": tid, "track": track, "session": session})
         self._wake.set()
+
+    def admit(self, session: str) -> None:
+        """Let the viser clients of ``session`` see the scene (ValueError if malformed)."""
+        self.gate.admit(session)
 
     def follow_state(self, session: str | None = None) -> dict[str, Any]:
         """The followed track, the point the cameras look at, and the clients' cameras.

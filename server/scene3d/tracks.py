@@ -1,6 +1,7 @@
 """The live tracks: each track's points from ``track_update`` messages, drawn as polylines.
 
-A track is a coloured polyline (:func:`~.style.track_colour`; ended tracks dimmed,
+A track is a polyline in its class's colour (:func:`~.style.class_colour`, as on the
+map; ended tracks dimmed,
 followed ones thick and yellow) 0.4 m above its points, drawn in pieces of
 :data:`_PIECE_SEGMENTS` segments (``/tracks/{id}/{k}``). At most :data:`_MAX_TRACKS` are
 kept: the ended ones seen longest ago go first, followed ones never.
@@ -15,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from .geometry import _LIFT_M, polyline_segments
-from .style import _FOLLOW_COLOUR, track_colour
+from .style import _FOLLOW_COLOUR, class_colour
 
 __all__ = ["TrackLayer"]
 
@@ -124,7 +125,7 @@ class TrackLayer:
         self.dirty.clear()
 
     def _style(self, tr: _Track) -> tuple[tuple[int, int, int], float]:
-        colour = track_colour(tr.id)
+        colour = class_colour(tr.cls)
         if tr.id in self.highlighted:
             return _FOLLOW_COLOUR, 7.0
         if tr.live:

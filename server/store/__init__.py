@@ -12,6 +12,8 @@ and the start-up replay derives them again from the durable detections.
 Tables
 ------
 ``schema_version``  the applied version (one row)
+``store_identity``  the file's random ``store_id`` (one row, made at first open; the
+                    stream's ``hello`` sends it: :mod:`.integrity`)
 ``batches``         one row per ingest request: optional client key, counts, report
 ``detections``      accepted detection records, id = arrival order
 ``fixes``           one per processed detection (derived: ray, every hit, status)
@@ -35,6 +37,7 @@ Modules
 :mod:`.batches`    durable ingest batches (group commit)
 :mod:`.derived`    fixes, tracks, activity and event-log writes
 :mod:`.queries`    read-side SQL
+:mod:`.integrity`  the store's id, the file check before each write, a full disk
 :mod:`.database`   opening and migrating the file; :class:`~.database.Store`
 
 May import ``demtrack.core`` value types and :mod:`demtrack.server.track_history`; nothing

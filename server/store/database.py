@@ -24,6 +24,7 @@ from . import schema
 from .batches import BatchMaker, StoredBatch, insert_batch_rows
 from .codec import loads_json, track_body_text
 from .derived import FixRow, write_derived_rows
+from .integrity import FileIdentity, ensure_store_id, translate_write_error
 from .queries import detection_row, points_of, read_track_rows, track_where, window_where
 from .schema import COUNTED_TABLES
 
@@ -38,6 +39,7 @@ MIGRATIONS: tuple[schema.Migration, ...] = (
     schema.m3_track_rev,
     schema.m4_track_points,
     schema.m5_row_counts,
+    schema.m6_markers,
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 
@@ -97,6 +99,9 @@ class Store:
         self.path = Path(path)
         self._w = connect(self.path)
         migrate(self._w)
+        #: The file's random identity (sent in the stream's ``hello``; :mod:`.integrity`).
+        self.store_id = ensure_store_id(self._w)
+        self._file = FileIdentity(self.path)
         self._r = connect(self.path)
         self._wlock = threading.Lock()
         self._rlock = threading.Lock()
@@ -110,22 +115,39 @@ class Store:
 
     # ------------------------------------------------------------------ writing
     def _tx(self, fn: Callable[[sqlite3.Connection], Any], *, sync: bool = True) -> Any:
-        """Run ``fn`` in one write transaction; ``sync=False``: commit without a WAL sync."""
+        """Run ``fn`` in one write transaction; ``sync=False``: commit without a WAL sync.
+
+        Raises :class:`~.integrity.StoreLostError` (the file was deleted or replaced: no
+        write is tried) or :class:`~.integrity.StoreFullError` (a full disk: rolled back).
+        """
         with self._wlock:
-            if not sync:
-                self._w.execute("PRAGMA synchronous=NORMAL")
+            self._file.check()
             try:
-                self._w.execute("BEGIN IMMEDIATE")
-                try:
-                    out = fn(self._w)
-                    self._w.execute("COMMIT")
-                except BaseException:
-                    self._w.execute("ROLLBACK")
+                return self._tx_locked(fn, sync)
+            except (sqlite3.Error, OSError) as exc:
+                out = translate_write_error(exc, self.path)
+                if out is exc:
                     raise
-            finally:
-                if not sync:
-                    self._w.execute("PRAGMA synchronous=FULL")
-            return out
+                raise out from None
+
+    def _tx_locked(self, fn: Callable[[sqlite3.Connection], Any], sync: bool) -> Any:
+        """:meth:`_tx` with the write lock held."""
+        if not sync:
+            self._w.execute("PRAGMA synchronous=NORMAL")
+        try:
+            self._w.execute("BEGIN IMMEDIATE")
+            try:
+                out = fn(self._w)
+                self._w.execute("COMMIT")
+            except BaseException:
+                # SQLite may have rolled back itself (a full disk): only roll back if open
+                if self._w.in_transaction:
+                    self._w.execute("ROLLBACK")
+                raise
+        finally:
+            if not sync:
+                self._w.execute("PRAGMA synchronous=FULL")
+        return out
 
     def insert_batch(
         self, detections: Sequence[Detection], report: dict[str, Any], batch_key: str | None

@@ -18,6 +18,7 @@ __all__ = [
     "m3_track_rev",
     "m4_track_points",
     "m5_row_counts",
+    "m6_markers",
 ]
 
 #: One schema step: run inside the transaction :func:`migrate` opens.
@@ -164,3 +165,13 @@ def m5_row_counts(conn: sqlite3.Connection) -> None:
                 f"CREATE TRIGGER {t}_count_{when.lower()} AFTER {when} ON {t} BEGIN"
                 f" UPDATE row_counts SET n = n {sign} 1 WHERE name = '{t}'; END"
             )
+
+
+def m6_markers(conn: sqlite3.Connection) -> None:
+    """Version 6: ``markers``, the points operators keep (one JSON body per row)."""
+    # AUTOINCREMENT: a removed marker's id is never given to another, so a console that
+    # still shows it cannot confuse the two.
+    conn.execute(
+        "CREATE TABLE markers (id INTEGER PRIMARY KEY AUTOINCREMENT, t_s REAL NOT NULL,"
+        " body TEXT NOT NULL)"
+    )

@@ -2,9 +2,14 @@
 
 Connect with the operator token (``?token=`` or an ``Authorization`` header) and
 optionally ``?since=N`` to be sent every stored message with ``seq > N`` before the live
-ones. With ``?batch=1`` the client is sent several stream messages per frame (``batch``
-messages) whenever more than one is waiting, live or replayed; without it (or with
-``batch=0``), one message per frame. Messages are described in
+ones, with ``&store=<id>`` (the ``store_id`` of the ``hello`` that ``N`` came from): a
+``since`` of another store (the server restarted on a fresh database) or beyond the
+newest message is not resumed, ``hello.start_over`` says so and the client is sent what
+comes after the newest message. A bad ``since`` (not an integer from 0 to 2^63 - 1) or
+``batch`` is answered with an ``error`` message, then a close (1008) with the same
+reason. With ``?batch=1`` the client is sent several stream messages per frame
+(``batch`` messages) whenever more than one is waiting, live or replayed; without it (or
+with ``batch=0``), one message per frame. Messages are described in
 :mod:`demtrack.server.messages`.
 """
 
@@ -20,7 +25,14 @@ from starlette.concurrency import run_in_threadpool
 from starlette.websockets import WebSocketDisconnect
 
 from ..hub import OVERFLOW, Client, Hub, pack, take
-from ..messages import ErrorMessage, HelloMessage, PongMessage, ResumeMessage, client_adapter
+from ..messages import (
+    MAX_SEQ,
+    ErrorMessage,
+    HelloMessage,
+    PongMessage,
+    ResumeMessage,
+    client_adapter,
+)
 from ..security import token_ok
 from ..state import ConsoleState
 from ..store.codec import dumps_json
@@ -47,7 +59,11 @@ async def _send_all(ws: WebSocket, hub: Hub, client: Client, texts: list[str]) -
 
 
 async def _replay(ws: WebSocket, state: ConsoleState, client: Client, since: int) -> None:
-    """Send stored messages with ``seq > since`` (the sender then skips older live ones)."""
+    """Send stored messages with ``seq > since`` (the sender then skips older live ones).
+
+    ``since`` at most the newest stored message (the callers check): a larger one would
+    make the sender skip every live message up to it.
+    """
     async with client.send_lock:
         after = since
         while True:
@@ -57,7 +73,42 @@ async def _replay(ws: WebSocket, state: ConsoleState, client: Client, since: int
                 after = rows[-1]["seq"]
             if len(rows) < _PAGE:
                 break
-        client.last_sent = max(after, since)
+        client.last_sent = after
+
+
+async def _resume(ws: WebSocket, state: ConsoleState, client: Client, since: int) -> None:
+    """Answer a ``resume``: the stored messages after ``since``.
+
+    Beyond the newest: a ``hello`` that starts the client over, then live messages.
+    """
+    last = await run_in_threadpool(state.store.last_seq)
+    if since > last:
+        await _hello(ws, state, client, since, True, last)
+    else:
+        await _replay(ws, state, client, since)
+
+
+async def _hello(
+    ws: WebSocket,
+    state: ConsoleState,
+    client: Client,
+    since: int | None,
+    start_over: bool,
+    last: int | None = None,
+) -> None:
+    """Send ``hello``; then the stored messages after ``since``, or none (live from now)."""
+    if last is None:
+        last = await run_in_threadpool(state.store.last_seq)
+    start_over = start_over or (since is not None and since > last)
+    hello = HelloMessage(
+        last_seq=last, since=since, store_id=state.store.store_id, start_over=start_over
+    )
+    async with client.send_lock:
+        await _send(ws, hello.model_dump_json())
+    if since is not None and not start_over:
+        await _replay(ws, state, client, since)
+    else:
+        client.last_sent = last
 
 
 async def _sender(ws: WebSocket, hub: Hub, client: Client) -> None:
@@ -112,11 +163,22 @@ async def _receiver(ws: WebSocket, state: ConsoleState, client: Client) -> None:
                 reply = _error(f"malformed message: {_summary(exc)}")
             else:
                 if isinstance(parsed, ResumeMessage):
-                    await _replay(ws, state, client, parsed.since)
+                    await _resume(ws, state, client, parsed.since)
                     continue
                 reply = PongMessage(nonce=parsed.nonce).model_dump_json()
         async with client.send_lock:
             await _send(ws, reply)
+
+
+def _since(text: str | None) -> tuple[int | None, str | None]:
+    """``?since=``'s value, or the one-line problem with it."""
+    if text is None:
+        return None, None
+    problem = f"since must be an integer from 0 to {MAX_SEQ} (a stream sequence number)"
+    if not text.isascii() or not text.isdigit() or len(text) > 19 or int(text) > MAX_SEQ:
+        shown = text if len(text) <= 24 else f"{text[:20]}... ({len(text)} characters)"
+        return None, f"{problem}, got {shown!r}"
+    return int(text), None
 
 
 @router.websocket("/ws")
@@ -126,30 +188,21 @@ async def stream(ws: WebSocket) -> None:
     if not token_ok(ws):
         await ws.close(code=1008, reason="operator token required")
         return
-    since_text = ws.query_params.get("since")
-    since: int | None = None
-    if since_text is not None:
-        try:
-            since = int(since_text)
-            if since < 0:
-                raise ValueError
-        except ValueError:
-            await ws.close(code=1008, reason="since must be a non-negative integer")
-            return
+    since, problem = _since(ws.query_params.get("since"))
     batch = _BATCH.get(ws.query_params.get("batch", "0").lower())
-    if batch is None:
-        await ws.close(code=1008, reason="batch must be 0 or 1")
+    if problem is None and batch is None:
+        problem = "batch must be 0 or 1"
+    await ws.accept()  # refusals are told in an error message, then the close reason
+    if problem is not None:
+        await _send(ws, _error(problem))
+        # a close reason holds at most 123 bytes; the error message has it all
+        await ws.close(code=1008, reason=problem.encode()[:120].decode(errors="ignore"))
         return
-    await ws.accept()
-    client = state.hub.register(batch=batch)
+    store = ws.query_params.get("store")
+    client = state.hub.register(batch=bool(batch))
     tasks: list[asyncio.Task] = []
     try:
-        last = await run_in_threadpool(state.store.last_seq)
-        await _send(ws, HelloMessage(last_seq=last, since=since).model_dump_json())
-        if since is not None:
-            await _replay(ws, state, client, since)
-        else:
-            client.last_sent = last
+        await _hello(ws, state, client, since, store is not None and store != state.store.store_id)
         tasks = [
             asyncio.create_task(_sender(ws, state.hub, client)),
             asyncio.create_task(_receiver(ws, state, client)),

@@ -56,6 +56,9 @@ def test_copied_choices_match_their_owners():
     assert choices.GEOLOCATE_RULES == tuple(RULES)
     assert choices.MANIFEST == MANIFEST
     assert choices.SCENARIO_NAMES == tuple(sorted(SCENARIOS))
+    from demtrack.samplesite.replay_source import SAMPLE_SCENARIOS
+
+    assert choices.REPLAY_NAMES == SAMPLE_SCENARIOS.names
     assert choices.ACTIVITY_CASE_NAMES == tuple(ACTIVITY_CASES)
     assert choices.ACTIVITY_SEED == DEFAULT_ACTIVITY_PARAMS.seed
     assert choices.FREE_PARAMETERS == tuple(FREE_PARAMETERS)

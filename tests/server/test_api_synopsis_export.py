@@ -15,7 +15,7 @@ import pytest
 from fastapi.testclient import TestClient
 from server_helpers import AUTH, make_app, post_in_time_batches
 
-from demtrack.core.io.track_io import GPX_NS, KML_NS
+from demtrack.core.io.track_io import GPX_NS, GX_NS, KML_NS
 from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import make_scenario
 from demtrack.server.synopsis import synopsis, trajectory
@@ -38,6 +38,17 @@ def fed(sample_site_dir, tmp_path_factory):
         yield c
 
 
+def _runs(body):
+    """The body's [lon, lat, h] per run between gaps (a one-point run twice), by hand."""
+    pts, runs = body["points"], []
+    for k, p in enumerate(pts):
+        cut = k == 0 or any(a <= pts[k - 1]["t_s"] and p["t_s"] <= b for a, b in body["gaps"])
+        if cut:
+            runs.append([])
+        runs[-1].append((p["lon_deg"], p["lat_deg"], p["h_m"]))
+    return [r if len(r) > 1 else r * 2 for r in runs]
+
+
 def _tracks(c, **params):
     r = c.get("/api/tracks", headers=AUTH, params=params)
     assert r.status_code == 200
@@ -55,12 +66,17 @@ def test_export_formats_hold_the_listed_points(fed):
     assert 'filename="tracks.geojson"' in r.headers["content-disposition"]
     feats = r.json()["features"]
     assert [f["properties"]["track_id"] for f in feats] == [t["id"] for t in tracks]
-    assert [tuple(c) for c in feats[0]["geometry"]["coordinates"]] == lonlath[0]
+    for f, t in zip(feats, tracks, strict=True):
+        # One line per run between gaps (a one-point run is its point twice).
+        assert f["geometry"]["type"] == "MultiLineString"
+        got = [[tuple(c) for c in line] for line in f["geometry"]["coordinates"]]
+        assert got == _runs(t)
 
     r = fed.get("/api/tracks/export?format=csv&t_from=5&t_to=25", headers=AUTH)
     rows = list(csv.DictReader(io.StringIO(r.text)))
     assert len(rows) == n_points
-    assert float(rows[0]["lon_deg"]) == lonlath[0][0][0]
+    assert float(rows[0]["longitude"]) == lonlath[0][0][0]
+    assert float(rows[0]["latitude"]) == lonlath[0][0][1]
 
     r = fed.get("/api/tracks/export?format=gpx&t_from=5&t_to=25", headers=AUTH)
     pts = ET.fromstring(r.content).iter(f"{{{GPX_NS}}}trkpt")
@@ -69,15 +85,16 @@ def test_export_formats_hold_the_listed_points(fed):
     r = fed.get("/api/tracks/export?format=kml&t_from=5&t_to=25", headers=AUTH)
     assert r.headers["content-type"] == "application/vnd.google-earth.kml+xml"
     root = ET.fromstring(r.content)
-    q = f"{{{KML_NS}}}"
+    q, gx = f"{{{KML_NS}}}", f"{{{GX_NS}}}"
     marks = root.findall(f"{q}Document/{q}Placemark")
     assert len(marks) == len(tracks)
     got = [
-        tuple(float(x) for x in c.split(","))
-        for g in marks[0].find(f"{q}MultiGeometry")
-        for c in g.findtext(f"{q}coordinates").split()
+        tuple(float(x) for x in c.text.split())
+        for g in marks[0].find(f"{gx}MultiTrack")
+        for c in g.findall(f"{gx}coord")
     ]
-    assert got == lonlath[0]  # lon,lat,alt in track order, runs concatenated
+    # lon lat in track order, runs concatenated (the sea-level alt: tests/server/test_exports.py)
+    assert [c[:2] for c in got] == [c[:2] for c in lonlath[0]]
 
 
 @pytest.mark.skipif(shutil.which("ogrinfo") is None, reason="needs ogrinfo (Debian gdal-bin)")
@@ -91,14 +108,15 @@ def test_geopackage_export_reads_back_with_ogrinfo(fed, tmp_path):
         ["ogrinfo", "-ro", "-al", "-q", str(path)], capture_output=True, text=True, check=True
     )
     assert "ERROR" not in out.stderr, out.stderr
-    lines = re.findall(r"LINESTRING Z \(([^)]*)\)", out.stdout)
+    lines = re.findall(r"MULTILINESTRING Z \((.*)\)", out.stdout)
     assert len(lines) == len(tracks)
     for text, t in zip(lines, tracks, strict=True):
-        got = np.array([[float(x) for x in c.split()] for c in text.split(",")])
-        want = np.array([(p["lon_deg"], p["lat_deg"], p["h_m"]) for p in t["points"]])
-        if len(want) == 1:
-            want = np.vstack([want, want])
-        np.testing.assert_allclose(got, want, rtol=0, atol=1e-8)
+        parts = re.findall(r"\(([^()]*)\)", text)
+        got = [[[float(x) for x in c.split()] for c in part.split(",")] for part in parts]
+        want = _runs(t)
+        assert [len(g) for g in got] == [len(w) for w in want]
+        for g, w in zip(got, want, strict=True):
+            np.testing.assert_allclose(g, w, rtol=0, atol=1e-8)
     n_points = sum(len(t["points"]) for t in tracks)
     assert len(re.findall(r"POINT Z \(", out.stdout)) == n_points
 

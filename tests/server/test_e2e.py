@@ -1,5 +1,5 @@
 """A real uvicorn process: ingest, SIGKILL mid-stream, restart; nothing acknowledged is lost
-and the tracks are those an uninterrupted run makes."""
+and the tracks and detected events are those an uninterrupted run makes."""
 
 from __future__ import annotations
 
@@ -113,6 +113,7 @@ def test_sigkill_mid_ingest_loses_no_acknowledged_detection(sample_site_dir, tmp
             stored = c.get("/api/detections", params={"limit": 10000}).json()
             tracks = c.get("/api/tracks").json()["tracks"]
             seq = c.get("/api/health").json()["last_seq"]
+            events = _events(c)
         assert len(stored) == len(recs)
         assert tracks
     finally:
@@ -137,6 +138,29 @@ def test_sigkill_mid_ingest_loses_no_acknowledged_detection(sample_site_dir, tmp
             "accepted"
         ] == len(recs)
         assert ref.get("/api/tracks", headers=AUTH).json()["tracks"] == tracks
+    # ... and, posted in the same batches without a kill, the same events (hand-off
+    # predictions, tracks confirmed and ended): the events replay identically too
+    (tmp_path / "ref-batches").mkdir()
+    with TestClient(make_app(sample_site_dir, tmp_path / "ref-batches")) as ref:
+        for k, batch in enumerate(batches):
+            r = ref.post(
+                "/api/detections", headers=AUTH, json={"detections": batch, "batch_key": f"b{k}"}
+            )
+            assert r.status_code == 200
+        ref_events = _events(ref, headers=AUTH)
+        assert ref.get("/api/tracks", headers=AUTH).json()["tracks"] == tracks
+    assert {e["kind"] for e in ref_events["detected"]} >= {"track_confirmed"}
+    assert events == ref_events
+
+
+def _events(c, **kw) -> dict[str, list]:
+    """The stored events, and the hand-off predictions, without their row ids."""
+
+    def rows(**params) -> list:
+        got = c.get("/api/events", params={"limit": 10000, **params}, **kw).json()["events"]
+        return [{k: v for k, v in e.items() if k != "id"} for e in got]
+
+    return {"detected": rows(), "handoff": rows(kind="handoff")}
 
 
 @pytest.mark.parametrize("setting", [None, "true"])

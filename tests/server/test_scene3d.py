@@ -18,6 +18,7 @@ from demtrack.core.terrain.grid import GridSpec
 from demtrack.server.messages import FixMessage, TrackUpdateMessage
 from demtrack.server.scene3d import (
     Scene3D,
+    class_colour,
     display_host,
     follow_offset,
     frustum_fov_aspect,
@@ -26,7 +27,6 @@ from demtrack.server.scene3d import (
     session_of_path,
     terrain_mesh,
     texture_uv,
-    track_colour,
     wxyz_from_matrix,
 )
 from demtrack.server.scene3d import following as scene_following
@@ -64,7 +64,8 @@ def site(sample_site_dir: Path):
 
 @pytest.fixture(scope="module")
 def scene(site):
-    sc = Scene3D(site, host="127.0.0.1", port=0, max_rays=5)
+    # The session gate has its own tests below; these clients connect on any path.
+    sc = Scene3D(site, host="127.0.0.1", port=0, max_rays=5, require_session=False)
     assert sc.wait_ready(120) and sc.error is None
     yield sc
     sc.stop()
@@ -464,13 +465,15 @@ def test_follow_moves_every_client_camera_to_the_track(scene):
             wait_for(lambda: np.allclose(newer.camera.look_at, head2))
         finally:
             b.close()
-        # Stopping: the head marker goes, the polyline gets its own colour back, and the
+        # Stopping: the head marker goes, the polyline gets its class's colour back, and the
         # cameras stay where they are.
         scene.follow(None)
         assert scene.flush()
         assert not scene._markers and scene.follow_state()["track_id"] is None
         line = scene.nodes["/tracks/41/0"]
-        assert tuple(np.asarray(line.colors).reshape(-1, 3)[0]) == track_colour(41)
+        assert tuple(np.asarray(line.colors).reshape(-1, 3)[0]) == class_colour(
+            scene._tracks.tracks[41].cls
+        )
         assert line.thickness == 4.0
         np.testing.assert_allclose(client.camera.look_at, head2, atol=1e-9)
     finally:
@@ -734,7 +737,13 @@ def test_follow_endpoint(client_factory):
     [track] = c.get("/api/tracks", headers=AUTH).json()["tracks"]
     scene = c.app.state.scene3d
     assert scene.wait_ready(120)
-    viewer = FakeViserClient(scene.server.get_port())
+    # Every viser client needs a session admitted with the operator token (the gate has
+    # its own test below): the "plain" viewer is one that never asks for its own track.
+    plain_sid = "plainviewer0001"
+    assert (
+        c.put("/api/scene3d/session", json={"session": plain_sid}, headers=AUTH).status_code == 200
+    )
+    viewer = FakeViserClient(scene.server.get_port(), f"/follow/{plain_sid}")
     try:
         viewer.send_camera(position=(0.0, -200.0, 150.0), look_at=(0.0, 0.0, 0.0))
         wait_for(lambda: len(scene.server.get_clients()) == 1)
@@ -759,6 +768,7 @@ def test_follow_endpoint(client_factory):
         assert r.json()["look_at_enu"] is None
         # A follow session: its own viser client moves, the plain one stays where it is.
         sid = "0123456789abcdef"
+        assert c.put("/api/scene3d/session", json={"session": sid}, headers=AUTH).status_code == 200
         mine = FakeViserClient(scene.server.get_port(), f"/follow/{sid}")
         try:
             mine.send_camera(position=(0.0, -200.0, 150.0), look_at=(0.0, 0.0, 0.0))
@@ -784,7 +794,7 @@ def test_follow_endpoint(client_factory):
             assert c.get(f"/api/scene3d/follow?session={sid}", headers=AUTH).json() == got
             everyone = c.get("/api/scene3d/follow", headers=AUTH).json()
             assert everyone["track_id"] is None and len(everyone["clients"]) == 2
-            [other] = [k for k in everyone["clients"] if k["session"] is None]
+            [other] = [k for k in everyone["clients"] if k["session"] == plain_sid]
             assert other["track_id"] is None
             assert other["look_at_enu"] == [0.0, 0.0, 0.0]  # untouched
             r = c.put("/api/scene3d/follow", json={"track_id": None, "session": sid}, headers=AUTH)
@@ -799,3 +809,46 @@ def test_follow_endpoint(client_factory):
         assert [q["name"] for q in params] == ["session"]
     finally:
         viewer.close()
+
+
+def test_scene_admits_only_sessions_registered_with_the_operator_token(client_factory):
+    """The 3D view needs the operator token as the console does: a viser client whose
+    WebSocket names no session admitted through ``PUT /api/scene3d/session`` (token
+    required) is closed with 4401 before it is sent anything; an admitted one sees the
+    scene."""
+    from server_helpers import AUTH
+    from websockets.exceptions import ConnectionClosed
+
+    c = client_factory(scene3d=True, viser_port=0)
+    scene = c.app.state.scene3d
+    assert scene.wait_ready(120)
+    port = scene.server.get_port()
+    sid = "a1b2c3d4e5f60718"
+    # Without the token, or with a malformed session: refused by the API.
+    assert c.put("/api/scene3d/session", json={"session": sid}).status_code == 401
+    for bad in ("short", "has/slash", "x" * 65, 7, None):
+        r = c.put("/api/scene3d/session", json={"session": bad}, headers=AUTH)
+        assert r.status_code == 422, (bad, r.text)
+    # Not admitted: the root path, an unregistered session. Closed, nothing received.
+    for path in ("/", f"/follow/{sid}", "/follow/zzzzzzzzzzzz"):
+        ws = FakeViserClient(port, path)
+        try:
+            wait_for(lambda ws=ws: ws.ws.close_code is not None)
+            assert ws.ws.close_code == 4401 and "operator token" in (ws.ws.close_reason or "")
+            assert ws.n_received == 0
+            with pytest.raises(ConnectionClosed):
+                ws.ws.send(b"x")
+        finally:
+            ws.close()
+    assert scene.gate.n_refused >= 3 and not scene.server.get_clients()
+    # Admitted with the token: the same session's client gets the scene and is listed.
+    r = c.put("/api/scene3d/session", json={"session": sid}, headers=AUTH)
+    assert r.status_code == 200 and r.json() == {"session": sid, "websocket_path": f"/follow/{sid}"}
+    ok = FakeViserClient(port, f"/follow/{sid}")
+    try:
+        ok.send_camera(position=(0.0, -200.0, 150.0), look_at=(0.0, 0.0, 0.0))
+        wait_for(lambda: len(scene.server.get_clients()) == 1)
+        wait_for(lambda: ok.n_received > 0)
+        assert ok.ws.close_code is None
+    finally:
+        ok.close()

@@ -32,7 +32,15 @@ def recv_until(ws, seq):
 def test_live_messages_have_consecutive_seqs_and_resume_gets_the_missed(client):
     with client.websocket_connect(f"/ws?token={TOKEN}") as ws:
         hello = recv(ws)
-        assert hello == {"type": "hello", "seq": None, "last_seq": 0, "since": None}
+        store_id = client.app.state.console.store.store_id
+        assert hello == {
+            "type": "hello",
+            "seq": None,
+            "last_seq": 0,
+            "since": None,
+            "store_id": store_id,
+            "start_over": False,
+        }
         ack = client.post("/api/detections", headers=AUTH, json={"detections": walk(n=10)}).json()
         last = client.get("/api/status", headers=AUTH).json()["last_seq"]
         live = recv_until(ws, last)
@@ -103,11 +111,11 @@ def test_bad_since_is_refused(client):
     from starlette.websockets import WebSocketDisconnect
 
     for q in ("since=-1", "since=x"):
-        with (
-            pytest.raises(WebSocketDisconnect) as err,
-            client.websocket_connect(f"/ws?token={TOKEN}&{q}"),
-        ):
-            pass
+        # told in an error message first (issue 26: not a silent close), then closed
+        with client.websocket_connect(f"/ws?token={TOKEN}&{q}") as ws:
+            assert recv(ws)["type"] == "error"
+            with pytest.raises(WebSocketDisconnect) as err:
+                ws.receive_json()
         assert err.value.code == 1008
 
 

@@ -173,11 +173,12 @@ def test_the_character_cap_splits_frames(client_factory):
 def test_bad_batch_flag_is_refused(client):
     from starlette.websockets import WebSocketDisconnect
 
-    with (
-        pytest.raises(WebSocketDisconnect) as err,
-        client.websocket_connect(f"/ws?token={TOKEN}&batch=yes"),
-    ):
-        pass
+    # told in an error message first (issue 26: not a silent close), then closed
+    with client.websocket_connect(f"/ws?token={TOKEN}&batch=yes") as ws:
+        msg = json.loads(ws.receive_text())
+        assert msg == {"type": "error", "seq": None, "message": "batch must be 0 or 1"}
+        with pytest.raises(WebSocketDisconnect) as err:
+            ws.receive_text()
     assert err.value.code == 1008
 
 

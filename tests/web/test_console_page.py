@@ -6,7 +6,6 @@ time), an independent pixel-from-click computation, and RFC 7946's lon/lat order
 
 from __future__ import annotations
 
-import json
 import math
 from typing import Any
 
@@ -97,7 +96,7 @@ def test_page_loads_offline_without_errors(page, fed_server):
     box = page.locator("#map").bounding_box()
     x, y = int(box["x"] + box["width"] / 2), int(box["y"] + box["height"] / 2)
     page.mouse.move(x, y)
-    page.wait_for_function("document.querySelector('#readout').textContent.includes('DEM')")
+    page.wait_for_function("document.querySelector('#readout').textContent.includes('elevation')")
     e, n = page.evaluate(
         f"window.demtrack.map.map.getCoordinateFromPixel([{x - box['x']}, {y - box['y']}])"
     )
@@ -105,7 +104,9 @@ def test_page_loads_offline_without_errors(page, fed_server):
         ans = c.get("/api/site/elevation", params={"e": round(e, 2), "n": round(n, 2)}).json()
     text = page.locator("#readout").text_content()
     assert f"{ans['lat_deg']:.6f}" in text and f"{ans['lon_deg']:.6f}" in text
-    assert f"{ans['u_m']:.1f} m" in text
+    # Issue 26 item 8: the elevation in its named datum, the local up beside it.
+    assert f"elevation {ans['elevation_m']:.1f} m ({ans['elevation_datum']})" in text
+    assert f"local up {ans['u_m']:.1f} m" in text
 
 
 # ----------------------------------------------------------------- click-to-geolocate
@@ -333,24 +334,7 @@ def test_trajectories_layer_draws_the_api_synopsis_and_follows_filters(page, fed
 
 
 # -------------------------------------------------------------------------- export
-def test_export_downloads_valid_geojson(page, fed_server):
-    open_console(page, fed_server)
-    page.select_option("#export-format", "geojson")
-    with page.expect_download() as info:
-        page.locator("#export-tracks").click()
-    doc = json.loads(open(info.value.path(), encoding="utf-8").read())
-    assert info.value.suggested_filename.endswith(".geojson")
-    assert doc["type"] == "FeatureCollection"
-    tracks = sorted(api_tracks(fed_server), key=lambda tr: tr["id"])
-    assert [f["properties"]["track_id"] for f in doc["features"]] == [tr["id"] for tr in tracks]
-    for f, tr in zip(doc["features"], tracks, strict=True):
-        assert f["type"] == "Feature" and f["geometry"]["type"] == "LineString"
-        coords = f["geometry"]["coordinates"]
-        # RFC 7946: [longitude, latitude, height]; the sample site is at 79.6 W, 40.4 N.
-        assert coords == [[p["lon_deg"], p["lat_deg"], p["h_m"]] for p in tr["points"]]
-        assert all(-80 < c[0] < -79 and 40 < c[1] < 41 for c in coords)
-        assert f["properties"]["times_s"] == [p["t_s"] for p in tr["points"]]
-    assert page.record.errors == []
+# The export menu downloads the server's files: tests/web/test_console_exports.py.
 
 
 # ----------------------------------------------------------------------- reconnect
@@ -378,44 +362,6 @@ def test_reconnects_after_server_restart(page, server_factory, scenario_records)
 
 
 # ------------------------------------------------------------- formats and bounds
-def test_exports_of_every_format_carry_the_api_positions(page, fed_server):
-    import csv
-    import io
-    import xml.etree.ElementTree as ET
-
-    open_console(page, fed_server)
-    tracks = sorted(api_tracks(fed_server), key=lambda tr: tr["id"])
-    out = page.evaluate(
-        """async () => {
-            const m = await import('/console/export.mjs');
-            const tracks = [...window.demtrack.store.tracks.values()]
-              .sort((a, b) => a.id - b.id);
-            return Object.fromEntries(
-              ['csv', 'gpx', 'kml'].map((f) => [f, m.renderTracks(f, tracks)]));
-        }"""
-    )
-    rows = list(csv.DictReader(io.StringIO(out["csv"])))
-    assert len(rows) == sum(len(tr["points"]) for tr in tracks)
-    p0 = tracks[0]["points"][0]
-    assert float(rows[0]["e_m"]) == pytest.approx(p0["e_m"], abs=1e-3)
-    assert float(rows[0]["lat_deg"]) == pytest.approx(p0["lat_deg"], abs=1e-9)
-    gpx = ET.fromstring(out["gpx"])
-    ns = {"g": "http://www.topografix.com/GPX/1/1"}
-    trks = gpx.findall("g:trk", ns)
-    assert len(trks) == len(tracks)
-    for trk, tr in zip(trks, tracks, strict=True):
-        pts = trk.findall("g:trkseg/g:trkpt", ns)
-        assert [(float(p.get("lat")), float(p.get("lon"))) for p in pts] == [
-            pytest.approx((q["lat_deg"], q["lon_deg"]), abs=1e-9) for q in tr["points"]
-        ]
-    kml = ET.fromstring(out["kml"])
-    coords = kml.findall(".//{http://www.opengis.net/kml/2.2}coordinates")
-    assert len(coords) == len(tracks)
-    first = [float(x) for x in coords[0].text.split()[0].split(",")]
-    assert first[:2] == pytest.approx([p0["lon_deg"], p0["lat_deg"]], abs=1e-9)  # lon, lat
-    assert first[2] == pytest.approx(p0["h_m"], abs=1e-3)  # written to the millimetre
-
-
 def test_store_stays_bounded(page, fed_server):
     open_console(page, fed_server)
     sizes = page.evaluate(

@@ -4,9 +4,66 @@
 // of the top-left pixel, so the image spans u in [-0.5, width - 0.5]. A click at fraction
 // fx of the displayed width is pixel u = fx * width - 0.5.
 
-import { classColour, el, fmt, HIT_COLOUR, SELECTED_COLOUR } from "./util.mjs";
+import { classColour, HIT_COLOUR, SELECTED_COLOUR } from "./palette.mjs";
+import { el, fmt } from "./util.mjs";
 
 const BOX_WINDOW_S = 0.6; // boxes shown for fixes this recent at the displayed time
+/** A new box takes the track of the same sensor's box it overlaps best (IoU at least
+ * LINK_MIN_IOU) among those of the last LINK_MAX_GAP_S seconds, until its own track
+ * arrives (tracks lag the fixes by the server's reorder lag, 0.6 s). */
+const LINK_MAX_GAP_S = 2.0;
+const LINK_MIN_IOU = 0.2;
+
+/** Intersection over union of two [u0, v0, u1, v1] boxes. */
+export function iou(a, b) {
+  const w = Math.min(a[2], b[2]) - Math.max(a[0], b[0]);
+  const h = Math.min(a[3], b[3]) - Math.max(a[1], b[1]);
+  if (w <= 0 || h <= 0) return 0;
+  const inter = w * h;
+  const area = (q) => Math.max(0, q[2] - q[0]) * Math.max(0, q[3] - q[1]);
+  return inter / (area(a) + area(b) - inter);
+}
+
+/**
+ * The track of each fix of `shown` (a sensor's boxes on screen): the track whose points
+ * carry its detection id, else (its track not yet arrived) the track of the box it
+ * continues: the best-overlapping earlier box of the same sensor and class within
+ * LINK_MAX_GAP_S, itself labelled either way. `recent` is the sensor's kept fixes (oldest
+ * first). Returns Map detection_id -> {tid, provisional}.
+ */
+export function linkBoxes(recent, shown, trackOf) {
+  const out = new Map();
+  if (!shown.length) return out;
+  const t0 = Math.min(...shown.map((f) => f.t_s)) - LINK_MAX_GAP_S;
+  const tEnd = Math.max(...shown.map((f) => f.t_s));
+  let open = []; // [{bbox, t_s, cls, tid, provisional}]: the latest box of each chain
+  const walk = recent.filter((f) => f.t_s >= t0 && f.t_s <= tEnd + 1e-6);
+  for (const f of shown) if (!walk.includes(f)) walk.push(f);
+  walk.sort((a, b) => a.t_s - b.t_s);
+  for (const f of walk) {
+    open = open.filter((o) => f.t_s - o.t_s <= LINK_MAX_GAP_S);
+    let tid = trackOf(f.detection_id);
+    let provisional = false;
+    let best = null;
+    let bestIou = LINK_MIN_IOU;
+    for (const o of open) {
+      if (o.cls !== f.cls || o.t_s >= f.t_s - 1e-9) continue;
+      const q = iou(o.bbox, f.bbox);
+      if (q >= bestIou) {
+        bestIou = q;
+        best = o;
+      }
+    }
+    if (tid === undefined && best && best.tid !== undefined) {
+      tid = best.tid;
+      provisional = true;
+    }
+    if (best) open.splice(open.indexOf(best), 1);
+    open.push({ bbox: f.bbox, t_s: f.t_s, cls: f.cls, tid, provisional });
+    out.set(f.detection_id, { tid, provisional });
+  }
+  return out;
+}
 
 export class CameraPanel {
   constructor(sensor, onClick) {
@@ -18,7 +75,7 @@ export class CameraPanel {
     this.root = el(
       "section",
       { class: "cam-panel", id: `cam-${sensor.id}` },
-      el("header", {}, el("b", { text: sensor.id }), el("span", { class: "muted", text: ` ${sensor.name}` }), this.status),
+      el("header", {}, el("span", { class: "swatch cam-swatch", title: `${sensor.id}'s colour on the map and in 3D` }), el("b", { text: sensor.id }), el("span", { class: "muted", text: ` ${sensor.name}` }), this.status),
       this.wrap,
     );
     this.click = null; // {u, v, result}
@@ -46,10 +103,22 @@ export class CameraPanel {
     if (this.lastDraw) this.draw(...this.lastDraw);
   }
 
-  /** Draw the boxes of `fixes` (with their track ids) and the clicked pixel. */
-  draw(fixes, trackOf, selectedId) {
-    this.lastDraw = [fixes, trackOf, selectedId];
-    this.drawn = []; // {detection_id, bbox, label}: what the panel shows (tests read it)
+  /** The camera's own colour (palette.mjs), on its header and its border. */
+  setColour(colour) {
+    this.colour = colour;
+    this.root.style.setProperty("--cam-colour", colour);
+  }
+
+  /**
+   * Draw the boxes of `fixes` and the clicked pixel. `trackOf(detection_id)` gives a box's
+   * track: a number, {tid, provisional} (a box whose own track has not arrived yet, labelled
+   * with the track of the box it continues), or undefined. `show(fix, tid)` says whether the
+   * filters let it through (default: all).
+   */
+  draw(fixes, trackOf, selectedId, show = () => true) {
+    this.lastDraw = [fixes, trackOf, selectedId, show];
+    this.drawn = []; // {detection_id, bbox, label, provisional}: what the panel shows (tests read it)
+    this.nFiltered = 0;
     const c = this.canvas;
     const g = c.getContext("2d");
     g.clearRect(0, 0, c.width, c.height);
@@ -61,7 +130,13 @@ export class CameraPanel {
     g.font = `bold ${fontPx}px system-ui, sans-serif`;
     g.textBaseline = "bottom";
     for (const f of fixes) {
-      const tid = trackOf(f.detection_id);
+      const link = trackOf(f.detection_id);
+      const tid = link !== null && typeof link === "object" ? link.tid : link;
+      const provisional = !!(link && typeof link === "object" && link.provisional);
+      if (!show(f, tid)) {
+        this.nFiltered += 1;
+        continue;
+      }
       const sel = tid !== undefined && tid === selectedId;
       const colour = sel ? SELECTED_COLOUR : classColour(f.cls);
       const [u0, v0, u1, v1] = f.bbox;
@@ -76,13 +151,15 @@ export class CameraPanel {
       g.strokeStyle = colour;
       g.strokeRect(x, y, w, h);
       const text = tid !== undefined ? `#${tid}` : f.tracked ? "…" : "·";
-      this.drawn.push({ detection_id: f.detection_id, bbox: f.bbox, label: text });
+      this.drawn.push({ detection_id: f.detection_id, bbox: f.bbox, label: text, provisional });
       g.lineWidth = 3;
       g.strokeStyle = "rgba(0,0,0,0.9)";
       g.strokeText(text, x, y - 2);
       g.fillStyle = colour;
       g.fillText(text, x, y - 2);
     }
+    if (this.nFiltered) this.root.dataset.filtered = String(this.nFiltered);
+    else delete this.root.dataset.filtered;
     if (this.click) {
       const x = px(this.click.u);
       const y = py(this.click.v);
@@ -106,7 +183,8 @@ export class CameraPanel {
         else lines.push("no terrain hit");
         g.textBaseline = "top";
         const lh = fontPx + 3;
-        const tx = x + 12 + 150 > c.width ? x - 150 : x + 12;
+        const textW = Math.max(...lines.map((line) => g.measureText(line).width));
+        const tx = Math.max(2, x + 12 + textW > c.width ? x - 12 - textW : x + 12);
         lines.forEach((line, k) => {
           g.lineWidth = 3;
           g.strokeStyle = "rgba(0,0,0,0.9)";
@@ -132,4 +210,40 @@ function cross(g, x, y) {
   g.stroke();
 }
 
-export { BOX_WINDOW_S };
+/**
+ * Sizes the camera panels so that all of them fit the column's height (one or two
+ * columns, whichever shows the images larger): opening the detail panel below them shrinks
+ * the images rather than pushing a camera out of sight. Re-fitted whenever the column
+ * changes size.
+ */
+export function fitCameras(root, panels) {
+  const fit = () => {
+    const list = [...panels()];
+    if (!list.length) return;
+    const gap = 6;
+    const pad = 12;
+    const W = root.clientWidth - pad;
+    const H = root.clientHeight - pad;
+    const head = 18;
+    const n = list.length;
+    let best = { cols: 1, w: 0 };
+    for (const cols of [1, 2]) {
+      const rows = Math.ceil(n / cols);
+      const cellW = (W - gap * (cols - 1)) / cols - 2;
+      let w = cellW;
+      for (const p of list) {
+        const aspect = p.sensor.width_px / p.sensor.height_px;
+        const cellH = (H - gap * (rows - 1)) / rows - head - 2;
+        w = Math.min(w, cellH * aspect);
+      }
+      if (w > best.w + 1) best = { cols, w };
+    }
+    const w = Math.max(120, Math.floor(best.w));
+    root.style.gridTemplateColumns = `repeat(${best.cols}, minmax(0, 1fr))`;
+    for (const p of list) p.wrap.style.width = `${w}px`;
+  };
+  new ResizeObserver(fit).observe(root);
+  return fit;
+}
+
+export { BOX_WINDOW_S, LINK_MAX_GAP_S };

@@ -1,6 +1,7 @@
 // The selection panel: a track's history (times, sensors, speed profile) or a geolocation.
 
-import { classColour, el, fmt, fmtT, SELECTED_COLOUR } from "./util.mjs";
+import { classColour, SELECTED_COLOUR } from "./palette.mjs";
+import { el, fmt, fmtT } from "./util.mjs";
 
 /** When each sensor saw the track: {sensor: [[t0, t1], ...]}, breaks longer than `joinS` split. */
 export function sensorSpans(track, joinS = 2.0) {
@@ -133,8 +134,8 @@ function row(k, v) {
 export function geoDetail(res, sensor, { rule, onRule, onKeep, onClose }) {
   const chosen = new Set((res.selected || []).map((h) => `${h.e_m},${h.n_m}`));
   const rows = [];
-  (res.hits || []).forEach((h, k) => rows.push(hitRow(`hit ${k + 1}`, h, chosen.has(`${h.e_m},${h.n_m}`))));
-  if (res.road) rows.push(hitRow("road", res.road, chosen.has(`${res.road.e_m},${res.road.n_m}`)));
+  (res.hits || []).forEach((h, k) => rows.push(...hitRow(`hit ${k + 1}`, h, chosen.has(`${h.e_m},${h.n_m}`))));
+  if (res.road) rows.push(...hitRow("road", res.road, chosen.has(`${res.road.e_m},${res.road.n_m}`)));
   const rules = ["first", "last", "road"].map((r) =>
     el("label", {}, el("input", { type: "radio", name: "geo-rule", value: r, checked: r === rule, onchange: () => onRule(r) }), ` ${r}`));
   return el(
@@ -148,15 +149,20 @@ export function geoDetail(res, sensor, { rule, onRule, onKeep, onClose }) {
     el("div", { class: "rules" }, el("span", { text: "rule: " }), ...rules,
       el("span", { class: "muted", text: ` · ${res.status}${res.crossed_nodata ? " · ray crossed a DEM hole" : ""}` })),
     el("table", { class: "hits" },
-      el("tr", {}, ...["", "E m", "N m", "U m", "lat °", "lon °", "range m", "σ m"].map((t) => el("th", { text: t }))),
+      el("tr", {}, ...["", "E m", "N m", "U m", "range m", "σ m"].map((t) => el("th", { text: t }))),
       ...rows),
   );
 }
 
+/** A hit as two rows: site frame, range and σ, then its WGS84 position under them (one
+ * row of eight columns does not fit the 400 px column: σ was cut off). */
 function hitRow(name, h, isChosen) {
-  return el("tr", { class: isChosen ? "chosen" : "", "data-e": String(h.e_m), "data-n": String(h.n_m), "data-lat": String(h.lat_deg), "data-lon": String(h.lon_deg) },
-    el("td", { text: `${isChosen ? "▶ " : ""}${name}` }),
-    el("td", { text: fmt(h.e_m, 2) }), el("td", { text: fmt(h.n_m, 2) }), el("td", { text: fmt(h.u_m, 2) }),
-    el("td", { text: fmt(h.lat_deg, 7) }), el("td", { text: fmt(h.lon_deg, 7) }),
-    el("td", { text: fmt(h.range_m, 1) }), el("td", { text: fmt(h.sigma_m, 2) }));
+  return [
+    el("tr", { class: isChosen ? "chosen" : "", "data-e": String(h.e_m), "data-n": String(h.n_m), "data-lat": String(h.lat_deg), "data-lon": String(h.lon_deg) },
+      el("td", { text: `${isChosen ? "▶ " : ""}${name}` }),
+      el("td", { text: fmt(h.e_m, 2) }), el("td", { text: fmt(h.n_m, 2) }), el("td", { text: fmt(h.u_m, 2) }),
+      el("td", { text: fmt(h.range_m, 1) }), el("td", { class: "sigma", text: fmt(h.sigma_m, 2) })),
+    el("tr", { class: `latlon${isChosen ? " chosen-ll" : ""}` },
+      el("td", { colspan: "6", text: `lat ${fmt(h.lat_deg, 7)}°  lon ${fmt(h.lon_deg, 7)}°` })),
+  ];
 }

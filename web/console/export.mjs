@@ -1,81 +1,18 @@
-// Client-side export of the selection (tracks) and of the kept markers.
+// Export of the selection (tracks) and of the kept markers.
 //
-// GeoJSON follows RFC 7946: WGS84 positions as [lon, lat, h] (h above the ellipsoid).
-// CSV carries both the site frame (e/n/u, m) and WGS84. GPX and KML are WGS84 lon/lat
-// with heights above the ellipsoid. Times are session seconds (t_s): no wall-clock epoch
-// is known to the console, so GPX <time> is left out and t_s goes into each point's <desc>.
+// Tracks are written by the server, `GET /api/tracks/export` (one writer per format, in
+// core/io/track_io.py; `demtrack track -o` uses the same): the page asks for the selected
+// track ids (and, when the trajectory window clips them, the window) and saves the bytes
+// the server answers, unchanged. GeoJSON: RFC 7946 MultiLineString, one line per run
+// between gaps, [lon, lat, h] with h ellipsoidal; CSV: longitude/latitude columns; GPX:
+// <time> and <ele> per point; KML/KMZ: a gx:Track per run (absolute altitudes);
+// GeoPackage: layers tracks and track_points with a spatial index. See docs/server.md.
+//
+// Markers live only in this page (no server store yet), so they are still written here:
+// GeoJSON [lon, lat, h] (h above the ellipsoid), CSV, GPX and KML waypoints.
 
+import { AuthError, token } from "./api.mjs";
 import { download, escapeXml } from "./util.mjs";
-
-function trackProps(t) {
-  const pts = t.points;
-  return {
-    track_id: t.id,
-    class: t.cls,
-    sensors: t.sensors,
-    t_start_s: pts.length ? pts[0].t_s : null,
-    t_end_s: pts.length ? pts[pts.length - 1].t_s : null,
-    n_points: pts.length,
-    gaps_s: t.gaps,
-    times_s: pts.map((p) => p.t_s),
-  };
-}
-
-export function tracksGeoJSON(tracks) {
-  return {
-    type: "FeatureCollection",
-    features: tracks
-      .filter((t) => t.points.length)
-      .map((t) => ({
-        type: "Feature",
-        id: t.id,
-        properties: trackProps(t),
-        geometry:
-          t.points.length === 1
-            ? { type: "Point", coordinates: [t.points[0].lon_deg, t.points[0].lat_deg, t.points[0].h_m] }
-            : { type: "LineString", coordinates: t.points.map((p) => [p.lon_deg, p.lat_deg, p.h_m]) },
-      })),
-  };
-}
-
-export function tracksCSV(tracks) {
-  const rows = ["track_id,class,t_s,e_m,n_m,u_m,lat_deg,lon_deg,h_m,sensors"];
-  for (const t of tracks) {
-    for (const p of t.points) {
-      rows.push(
-        [t.id, t.cls, p.t_s, p.e_m.toFixed(3), p.n_m.toFixed(3), p.u_m.toFixed(3),
-          p.lat_deg.toFixed(9), p.lon_deg.toFixed(9), p.h_m.toFixed(3), (p.sensors || []).join(";")].join(","),
-      );
-    }
-  }
-  return rows.join("\n") + "\n";
-}
-
-export function tracksGPX(tracks) {
-  const out = ['<?xml version="1.0" encoding="UTF-8"?>',
-    '<gpx version="1.1" creator="demtrack console" xmlns="http://www.topografix.com/GPX/1/1">'];
-  for (const t of tracks) {
-    out.push(`<trk><name>track ${t.id} (${escapeXml(t.cls)})</name><trkseg>`);
-    for (const p of t.points) {
-      out.push(`<trkpt lat="${p.lat_deg.toFixed(9)}" lon="${p.lon_deg.toFixed(9)}"><ele>${p.h_m.toFixed(3)}</ele><desc>t_s=${p.t_s}</desc></trkpt>`);
-    }
-    out.push("</trkseg></trk>");
-  }
-  out.push("</gpx>");
-  return out.join("\n") + "\n";
-}
-
-export function tracksKML(tracks) {
-  const out = ['<?xml version="1.0" encoding="UTF-8"?>',
-    '<kml xmlns="http://www.opengis.net/kml/2.2"><Document><name>demtrack tracks</name>'];
-  for (const t of tracks) {
-    const coords = t.points.map((p) => `${p.lon_deg.toFixed(9)},${p.lat_deg.toFixed(9)},${p.h_m.toFixed(3)}`).join(" ");
-    out.push(`<Placemark><name>track ${t.id}</name><description>${escapeXml(t.cls)}; t_s ${t.points.length ? t.points[0].t_s : ""}–${t.points.length ? t.points[t.points.length - 1].t_s : ""}</description>`);
-    out.push(`<LineString><altitudeMode>absolute</altitudeMode><coordinates>${coords}</coordinates></LineString></Placemark>`);
-  }
-  out.push("</Document></kml>");
-  return out.join("\n") + "\n";
-}
 
 // ------------------------------------------------------------------------- markers
 export function markersGeoJSON(markers) {
@@ -119,19 +56,71 @@ export function markersKML(markers) {
   return out.join("\n") + "\n";
 }
 
+/** Track formats the server writes: value -> file extension. */
 export const FORMATS = {
-  geojson: { ext: "geojson", mime: "application/geo+json" },
-  csv: { ext: "csv", mime: "text/csv" },
-  gpx: { ext: "gpx", mime: "application/gpx+xml" },
-  kml: { ext: "kml", mime: "application/vnd.google-earth.kml+xml" },
+  geojson: { ext: "geojson" },
+  csv: { ext: "csv" },
+  gpx: { ext: "gpx" },
+  kml: { ext: "kml" },
+  kmz: { ext: "kmz" },
+  gpkg: { ext: "gpkg" },
 };
+/** Formats the page can write markers in. */
+export const MARKER_FORMATS = ["geojson", "csv", "gpx", "kml"];
 
-export function renderTracks(format, tracks) {
-  if (format === "geojson") return JSON.stringify(tracksGeoJSON(tracks), null, 1);
-  if (format === "csv") return tracksCSV(tracks);
-  if (format === "gpx") return tracksGPX(tracks);
-  if (format === "kml") return tracksKML(tracks);
-  throw new Error(`unknown format ${format}`);
+/** The export URL of `tracks` (page track objects, possibly clipped to a window). */
+export function tracksExportURL(format, tracks, { clipped = false } = {}) {
+  if (!FORMATS[format]) throw new Error(`unknown format ${format}`);
+  const q = new URLSearchParams({ format });
+  for (const t of tracks) q.append("track", String(t.id));
+  if (clipped) {
+    // The server clips each track to [t_from, t_to]: the span of the clipped points gives
+    // every track the same points the page holds for it.
+    const ts = tracks.flatMap((t) => (t.points.length ? [t.points[0].t_s, t.points[t.points.length - 1].t_s] : []));
+    if (ts.length) {
+      q.set("t_from", String(Math.min(...ts)));
+      q.set("t_to", String(Math.max(...ts)));
+    }
+  }
+  return `/api/tracks/export?${q}`;
+}
+
+/** The server's file for the tracks: {blob, name}. */
+export async function fetchTracksExport(format, tracks, opts = {}) {
+  const h = {};
+  const t = token();
+  if (t) h.Authorization = `Bearer ${t}`;
+  const url = tracksExportURL(format, tracks, opts);
+  const resp = await fetch(url, { headers: h });
+  if (resp.status === 401) throw new AuthError("operator token required or wrong");
+  if (!resp.ok) {
+    let detail = resp.statusText;
+    try {
+      detail = (await resp.json()).detail || detail;
+    } catch (_) {
+      /* not JSON */
+    }
+    throw new Error(`export: ${resp.status} ${detail}`);
+  }
+  return { blob: await resp.blob(), name: `demtrack-tracks.${FORMATS[format].ext}` };
+}
+
+/** Saves the tracks, as the server writes them, as `demtrack-tracks.<ext>`. */
+export async function downloadTracks(format, tracks) {
+  const clipped = !!document.querySelector("#syn-on")?.checked;
+  const button = document.querySelector("#export-tracks");
+  if (button) button.dataset.state = "busy";
+  try {
+    const { blob, name } = await fetchTracksExport(format, tracks, { clipped });
+    download(name, blob.type || "application/octet-stream", blob);
+    if (button) button.dataset.state = "done";
+  } catch (err) {
+    if (button) {
+      button.dataset.state = "error";
+      button.title = String(err.message || err);
+    }
+    console.warn(`track export failed: ${err.message || err}`);
+  }
 }
 
 export function renderMarkers(format, markers) {
@@ -139,17 +128,19 @@ export function renderMarkers(format, markers) {
   if (format === "csv") return markersCSV(markers);
   if (format === "gpx") return markersGPX(markers);
   if (format === "kml") return markersKML(markers);
-  throw new Error(`unknown format ${format}`);
+  throw new Error(`markers cannot be written as ${format} in the page (use GeoJSON, CSV, GPX or KML)`);
 }
 
-/** Saves the tracks as a file in the format (`demtrack-tracks.<ext>`). */
-export function downloadTracks(format, tracks) {
-  const f = FORMATS[format];
-  download(`demtrack-tracks.${f.ext}`, f.mime, renderTracks(format, tracks));
-}
+const MARKER_MIME = {
+  geojson: "application/geo+json",
+  csv: "text/csv",
+  gpx: "application/gpx+xml",
+  kml: "application/vnd.google-earth.kml+xml",
+};
 
-/** Saves the markers as a file in the format (`demtrack-markers.<ext>`). */
+/** Saves the markers as a file in the format (`demtrack-markers.<ext>`); GeoJSON when the
+ * chosen format is one only the server writes (KMZ, GeoPackage). */
 export function downloadMarkers(format, markers) {
-  const f = FORMATS[format];
-  download(`demtrack-markers.${f.ext}`, f.mime, renderMarkers(format, markers));
+  const f = MARKER_FORMATS.includes(format) ? format : "geojson";
+  download(`demtrack-markers.${f}`, MARKER_MIME[f], renderMarkers(f, markers));
 }

@@ -8,6 +8,10 @@
 // takes the WebSocket URL from its `?websocket=` URL parameter (viserFrameUrl), and the
 // scene reads the path of each connection (server/scene3d/connections.py).
 //
+// The session is also the page's ticket into the scene: the scene admits only viser
+// clients of a session registered with the operator token (`register`, PUT
+// /api/scene3d/session), so the 3D tab loads its iframe after that answer.
+//
 // One request in flight; the newest choice wins (a quick re-selection sends only the
 // last one once the first answer is in). A request that fails on the way (no answer, a
 // dropped connection, a 5xx from a busy or restarting server) is sent again after a growing
@@ -71,6 +75,29 @@ export class SceneFollow {
     this.requests = 0; // PUTs sent, resends included
     this.retries = 0; // resends after a failure on the way
     this.retrying = false; // waiting to send again after a failure on the way
+    this.registered = null; // the registration's promise (register)
+    this.admitted = false; // whether the scene admitted this page's session
+  }
+
+  /** Admit this page's viser client into the scene (once; failures on the way retried). */
+  register() {
+    if (!this.enabled) return Promise.resolve(null);
+    this.registered ||= (async () => {
+      for (let attempt = 0; ; attempt += 1) {
+        try {
+          const answer = await api.putJSON("/api/scene3d/session", { session: this.session }, { signal: AbortSignal.timeout(REQUEST_TIMEOUT_MS) });
+          this.admitted = true;
+          return answer;
+        } catch (err) {
+          if (!isTransient(err) || attempt >= RETRY_DELAYS_MS.length) {
+            this.registered = null; // the next 3D tab visit tries again
+            throw err;
+          }
+          await sleep(RETRY_DELAYS_MS[attempt]);
+        }
+      }
+    })();
+    return this.registered;
   }
 
   /** Follow `trackId` (null stops following). */

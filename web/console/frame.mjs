@@ -2,12 +2,12 @@
 // changed (`ui.dirty`), the map and the camera panels are redrawn; the lists and the
 // detail panel follow at a slower pace (lists.mjs, selection.mjs).
 
-import { BOX_WINDOW_S } from "./cameras.mjs";
-import { eventTrackId, KIND } from "./events.mjs";
+import { BOX_WINDOW_S, linkBoxes } from "./cameras.mjs";
+import { ACTIVITY_KINDS, eventTrackId, KIND } from "./events.mjs";
 import { bufferCovers } from "./history.mjs";
 import { tickLists } from "./lists.mjs";
 import { tickDetail } from "./selection.mjs";
-import { store, timeline, trackList, ui, visible } from "./state.mjs";
+import { boxVisible, store, timeline, trackList, ui, visible } from "./state.mjs";
 import { positionAt } from "./store.mjs";
 import { drawSynopsis } from "./synopsis.mjs";
 import { $ } from "./util.mjs";
@@ -46,20 +46,33 @@ function redraw(t) {
     const past = !timeline.live && !bufferCovers(store, sid, t, BOX_WINDOW_S);
     if (past) {
       const fixes = ui.past.fixesNear(sid, t, BOX_WINDOW_S);
-      panel.draw(fixes || [], (d) => ui.past.trackOf(d) ?? store.trackOfDetection(d), ui.selectedId);
+      panel.draw(fixes || [], (d) => ui.past.trackOf(d) ?? store.trackOfDetection(d), ui.selectedId, boxVisible);
     } else {
-      panel.draw(store.fixesNear(sid, t, BOX_WINDOW_S), (d) => store.trackOfDetection(d), ui.selectedId);
+      // A box whose track has not arrived yet (tracks lag the fixes by the server's reorder
+      // lag) takes the track of the box it continues (cameras.mjs linkBoxes).
+      const fixes = store.fixesNear(sid, t, BOX_WINDOW_S);
+      const links = linkBoxes(store.fixes.get(sid) || [], fixes, (d) => store.trackOfDetection(d));
+      panel.draw(fixes, (d) => links.get(d), ui.selectedId, boxVisible);
     }
     panel.root.dataset.boxes = past ? "stored" : "recent";
   }
   if (ui.following && ui.selectedId !== null) {
+    // The view before following is kept, and given back when following stops (Follow
+    // again, Esc, another selection).
+    if (!followView) followView = { center: map.view.getCenter(), resolution: map.view.getResolution() };
     const tr = store.tracks.get(ui.selectedId);
     const p = tr && (positionAt(tr, t) || lastPoint(tr, t));
     if (p) map.centreOn(p.e_m, p.n_m);
+  } else if (followView) {
+    map.view.setResolution(followView.resolution);
+    map.view.setCenter(followView.center);
+    followView = null;
   }
   map.trails.changed();
   $("#counts").textContent = `${store.tracks.size} tracks · ${store.nPoints()} points`;
 }
+
+let followView = null; // {center, resolution} of the map before Follow
 
 function lastPoint(tr, t) {
   const pts = tr.points.filter((p) => p.t_s <= t);
@@ -72,6 +85,7 @@ function drawEventsOnMap(t) {
   const items = [];
   for (const ev of store.events) {
     if (ev.t_s === null || ev.t_s > t || ev.t_s < t - 120) continue;
+    if (ACTIVITY_KINDS.has(ev.kind)) continue; // drawn by activity_layer.mjs, for the whole window
     const id = eventTrackId(ev);
     const tr = id !== null ? store.tracks.get(id) : null;
     if (tr && !visible(tr)) continue;

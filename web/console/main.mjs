@@ -14,6 +14,7 @@
 // filters), controls.mjs (cameras, map pointer, buttons, tabs, keyboard).
 
 import * as api from "./api.mjs";
+import { installActivityLayer } from "./activity_layer.mjs";
 import { askToken, setConn, wireTokenForm } from "./conn.mjs";
 import { buildCameras, loadRelief, showFollow, wireControls, wireMap } from "./controls.mjs";
 import { eventsFromTracks, normEvent } from "./events.mjs";
@@ -21,6 +22,7 @@ import { SceneFollow } from "./follow.mjs";
 import { startFrames } from "./frame.mjs";
 import { drawLists } from "./lists.mjs";
 import { SiteMap } from "./map.mjs";
+import { loadMarkers } from "./markers.mjs";
 import { onMessage, onReset } from "./messages.mjs";
 import { onSelectionChange } from "./selection.mjs";
 import { buildFilters, buildLayerList } from "./sidebar.mjs";
@@ -62,6 +64,7 @@ async function boot() {
   $("#site-name").textContent = site.name;
   ui.map = new SiteMap("map", site);
   window.demtrack.map = ui.map;
+  installActivityLayer(ui.map); // loitering circles, rendezvous links, convoys (activity_layer.mjs)
   ui.vis = new VisibilityLayers(ui.map, site, sensors);
   ui.follow3d = new SceneFollow(!!ui.viserUrl, showFollow);
   ui.past.onLoad = () => (ui.dirty = true);
@@ -93,7 +96,8 @@ async function boot() {
       for (const e of list || []) store.applyEvent(normEvent({ kind: e.kind, t_s: e.t_start_s, event: e }));
     }).catch(() => {})
     : Promise.resolve();
-  await Promise.all([ortho, relief, roads, images, tracks, events]);
+  const markers = loadMarkers(); // stored markers (markers.mjs); the stream keeps them current
+  await Promise.all([ortho, relief, roads, images, tracks, events, markers]);
   if (!store.events.length) { // no event log on this server (or none yet)
     eventsFromTracks(store.tracks.values()).forEach((e) => store.applyEvent(e));
   }

@@ -7,7 +7,7 @@
 /* global ol */
 import { eventColour, KIND } from "./events.mjs";
 import { lastIndexAtOrBefore, positionAt } from "./store.mjs";
-import { classColour, HIT_COLOUR, SELECTED_COLOUR } from "./util.mjs";
+import { classColour, HIT_COLOUR, MARKER_COLOUR, MARKER_EDGE_COLOUR, ROAD_COLOUR, SELECTED_COLOUR, sensorColour, withAlpha } from "./palette.mjs";
 
 const TRAIL_S = 30; // seconds of trail behind each live position
 const HOLD_LIVE_S = 10;
@@ -62,6 +62,24 @@ function northArrow() {
   return new ol.control.Control({ element: div });
 }
 
+/** A "home" button under the zoom buttons: the whole site back in view. */
+function homeControl(onHome) {
+  const div = document.createElement("div");
+  div.className = "home-ctl ol-unselectable ol-control";
+  const b = document.createElement("button");
+  b.type = "button";
+  b.id = "map-home";
+  b.title = "Zoom to the site (Home)";
+  b.setAttribute("aria-label", "zoom to the site");
+  b.textContent = "⌂";
+  b.addEventListener("click", () => onHome());
+  div.append(b);
+  return new ol.control.Control({ element: div });
+}
+
+/** Pixels within which two hits' labels would overlap (they are then listed as one). */
+const LABEL_SPREAD_PX = 16;
+
 export class SiteMap {
   constructor(target, site) {
     this.site = site;
@@ -90,7 +108,7 @@ export class SiteMap {
     });
     this.sensors = vectorLayer("sensors", "Sensors", 7, (f) => this.sensorStyle(f));
     this.events = vectorLayer("events", "Events", 8, (f) => this.eventStyle(f));
-    this.geo = vectorLayer("geolocation", "Geolocation hits", 9, (f) => this.geoStyle(f));
+    this.geo = vectorLayer("geolocation", "Geolocation hits", 9, (f, res) => this.geoStyle(f, res));
     this.markers = vectorLayer("markers", "Markers", 10, (f) => this.markerStyle(f));
     this.selectedId = null;
 
@@ -108,9 +126,10 @@ export class SiteMap {
       view: this.view,
       controls: ol.control.defaults
         .defaults({ rotate: false, attribution: false })
-        .extend([new ol.control.ScaleLine({ units: "metric", bar: true, steps: 4, text: true, minWidth: 100 }), northArrow()]),
+        .extend([new ol.control.ScaleLine({ units: "metric", bar: true, steps: 4, text: true, minWidth: 100 }), northArrow(),
+          homeControl(() => this.home())]),
     });
-    this.view.fit([b[0], b[1], b[2], b[3]], { padding: [10, 10, 10, 10] });
+    this.home();
 
     // What drawing the trajectories' image costs (ms): the map's render after a rebuild of
     // its features (that render draws the image anew). The page refreshes it less often
@@ -137,6 +156,28 @@ export class SiteMap {
 
   setImage(layer, url, bounds) {
     layer.setSource(url ? new ol.source.ImageStatic({ url, imageExtent: bounds, projection: this.proj, interpolate: true }) : null);
+  }
+
+  /** The whole site (the DEM's bounds) in view. */
+  home() {
+    const b = this.site.dem.bounds_enu;
+    this.view.fit([b[0], b[1], b[2], b[3]], { padding: [10, 10, 10, 10] });
+  }
+
+  /** Whether the whole site is in view (within a few per cent). */
+  siteInView() {
+    const b = this.site.dem.bounds_enu;
+    const size = this.map.getSize();
+    if (!size) return false;
+    const ext = this.view.calculateExtent(size);
+    const tol = 0.05 * Math.max(b[2] - b[0], b[3] - b[1]);
+    return ext[0] <= b[0] + tol && ext[1] <= b[1] + tol && ext[2] >= b[2] - tol && ext[3] >= b[3] - tol;
+  }
+
+  /** A sensor's own colour (palette.mjs: by rank in sorted id order). */
+  sensorColour(id) {
+    const ids = this.sensorList ? this.sensorList.map((s) => s.id) : this.site.sensors || [];
+    return sensorColour(id, ids);
   }
 
   // ------------------------------------------------------------------ static layers
@@ -286,6 +327,7 @@ export class SiteMap {
       f.set("chosen", chosen.has(`${h.e_m},${h.n_m}`));
       f.set("label", h.source === "road" ? "road" : String(k + 1));
       f.set("sigma", h.sigma_m);
+      f.set("index", k);
       feats.push(f);
       if (chosen.has(`${h.e_m},${h.n_m}`) && h.sigma_m > 0) {
         const c = new ol.Feature(new ol.geom.Circle([h.e_m, h.n_m], h.sigma_m));
@@ -311,14 +353,15 @@ export class SiteMap {
     const w = Math.max(2, Math.min(14, f.get("width_m") / res));
     return [
       new ol.style.Style({ stroke: stroke("rgba(40,40,40,0.8)", w + 2) }),
-      new ol.style.Style({ stroke: stroke("rgba(245,235,200,0.9)", w) }),
+      new ol.style.Style({ stroke: stroke(withAlpha(ROAD_COLOUR, 0.9), w) }),
     ];
   }
 
-  coverageStyle() {
+  coverageStyle(f) {
+    const c = this.sensorColour(f.get("sensor"));
     return new ol.style.Style({
-      fill: new ol.style.Fill({ color: "rgba(120,200,255,0.16)" }),
-      stroke: stroke("rgba(140,210,255,0.9)", 1.5, [6, 4]),
+      fill: new ol.style.Fill({ color: withAlpha(c, 0.14) }),
+      stroke: stroke(withAlpha(c, 0.9), 1.5, [6, 4]),
     });
   }
 
@@ -327,10 +370,10 @@ export class SiteMap {
       image: new ol.style.RegularShape({
         points: 3,
         radius: 9,
-        fill: new ol.style.Fill({ color: "#7fdcff" }),
-        stroke: stroke("#00202c", 2),
+        fill: new ol.style.Fill({ color: this.sensorColour(f.get("sensor")) }),
+        stroke: stroke("#000", 2),
       }),
-      text: label(f.get("sensor"), "#d8f5ff", -16),
+      text: label(f.get("sensor"), this.sensorColour(f.get("sensor")), -16),
     });
   }
 
@@ -384,7 +427,35 @@ export class SiteMap {
     });
   }
 
-  geoStyle(f) {
+  /** The label of a hit: hits whose labels would overlap at this resolution are listed in
+   * one label ("1, 2") at the first of them; the others are drawn without one. */
+  hitLabel(f, res) {
+    const own = f.get("label");
+    const near = [];
+    const [x, y] = f.getGeometry().getCoordinates();
+    const r = LABEL_SPREAD_PX * res;
+    for (const g of this.geo.getSource().getFeatures()) {
+      const kind = g.get("kind");
+      if (kind !== "hit" && kind !== "road") continue;
+      const [gx, gy] = g.getGeometry().getCoordinates();
+      if (Math.hypot(gx - x, gy - y) <= r) near.push(g);
+    }
+    if (near.length <= 1) return own;
+    near.sort((a, b) => a.get("index") - b.get("index"));
+    if (near[0] !== f) return "";
+    return near.map((g) => g.get("label")).join(", ");
+  }
+
+  /** The hit labels drawn at the current zoom: [{label, e_m, n_m}] (tests read them). */
+  hitLabels() {
+    const res = this.view.getResolution();
+    return this.geo.getSource().getFeatures()
+      .filter((f) => f.get("kind") === "hit" || f.get("kind") === "road")
+      .map((f) => ({ label: this.hitLabel(f, res), e_m: f.getGeometry().getCoordinates()[0], n_m: f.getGeometry().getCoordinates()[1] }))
+      .filter((x) => x.label);
+  }
+
+  geoStyle(f, res) {
     const kind = f.get("kind");
     if (kind === "ray") return new ol.style.Style({ stroke: stroke(HIT_COLOUR, 2, [4, 4]) });
     if (kind === "sigma") {
@@ -398,7 +469,7 @@ export class SiteMap {
       image: chosen
         ? circle(8, SELECTED_COLOUR, "#000", 2)
         : kind === "road" ? circle(5, "#ffffff", HIT_COLOUR, 2) : circle(5, HIT_COLOUR, "#000", 1.5),
-      text: label(f.get("label"), chosen ? SELECTED_COLOUR : "#ffd6f6", -14),
+      text: label(this.hitLabel(f, res), chosen ? SELECTED_COLOUR : "#ffd6f6", -14),
       zIndex: chosen ? 2 : 1,
     });
   }
@@ -407,10 +478,10 @@ export class SiteMap {
     return new ol.style.Style({
       image: new ol.style.RegularShape({
         points: 4, radius: 8, angle: Math.PI / 4,
-        fill: new ol.style.Fill({ color: "#ffffff" }),
-        stroke: stroke("#d00000", 3),
+        fill: new ol.style.Fill({ color: MARKER_COLOUR }),
+        stroke: stroke(MARKER_EDGE_COLOUR, 3),
       }),
-      text: label(f.get("name"), "#ffffff", -16),
+      text: label(f.get("name"), MARKER_COLOUR, -16),
     });
   }
 

@@ -2,7 +2,8 @@
 // status go into the store (or the camera panels); a reset reloads the tracks.
 
 import * as api from "./api.mjs";
-import { KIND, normEvent } from "./events.mjs";
+import { applyPrediction, isPrediction, KIND, normEvent } from "./events.mjs";
+import { onMarkerMessage } from "./markers.mjs";
 import { store, ui } from "./state.mjs";
 import { fmtT } from "./util.mjs";
 
@@ -12,8 +13,10 @@ export function onMessage(msg) {
   else if (msg.type === "track_update") store.applyTrack(msg.track);
   else if (msg.type === "event") {
     // `ingest` (a batch accepted) is the server's bookkeeping, not an operator's event.
-    if (msg.kind !== KIND.INGEST) store.applyEvent(normEvent(msg));
+    if (isPrediction(msg)) applyPrediction(msg); // a track's annotation, not an event (events.mjs)
+    else if (msg.kind !== KIND.INGEST) store.applyEvent(normEvent(msg));
   }
+  else if (msg.type === "marker") onMarkerMessage(msg); // markers.mjs
   else if (msg.type === "sensor_status") {
     store.sensorStatus.set(msg.sensor, msg);
     const p = ui.cams.get(msg.sensor);

@@ -1,10 +1,17 @@
 // The selection and the detail panel: a track picked on the map, in a list or from an
 // event (its history in the panel, the 3D scene following it), or a camera pixel
 // geolocated (the hits in the panel and on the map). One of them at a time.
+//
+// Selecting an event (`selectEvent`: a row of the event list, an episode on the map)
+// selects all its tracks: `ui.selectedEvent` holds it, `ui.selectedIds` its tracks (the
+// lists and the activity layer mark them all), and the first is the track shown below the
+// event in the detail panel (each of the others one click away). A track's detail ends
+// with its hand-off prediction (events.mjs `predictions`), which is not an event.
 
 import * as api from "./api.mjs";
 import { askToken } from "./conn.mjs";
 import { drawSpeed, geoDetail, trackDetail } from "./detail.mjs";
+import { applyPrediction, fmtClock, KIND, predictions, predictionText } from "./events.mjs";
 import { downloadTracks } from "./export.mjs";
 import { keepMarker } from "./markers.mjs";
 import { store, timeline, ui } from "./state.mjs";
@@ -23,8 +30,12 @@ function selectionChanged() {
   for (const fn of listeners) fn();
 }
 
-/** Selects track `id` (ends a geolocation). */
-export function select(id) {
+/** Selects track `id` (ends a geolocation and an event selection). */
+export function select(id, { keepEvent = false } = {}) {
+  if (!keepEvent) {
+    ui.selectedEvent = null;
+    ui.selectedIds = id === null ? new Set() : new Set([id]);
+  }
   ui.selectedId = id;
   ui.following = false;
   ui.follow3d.set(id);
@@ -38,8 +49,23 @@ export function select(id) {
   selectionChanged();
 }
 
+/** Selects event `ev` and all its tracks (the first held one shown in the detail). */
+export function selectEvent(ev) {
+  ui.selectedEvent = ev;
+  ui.selectedIds = new Set(ev.track_ids || []);
+  const first = (ev.track_ids || []).find((id) => store.tracks.has(id)) ?? null;
+  select(first, { keepEvent: true });
+}
+
+/** Whether track `id` is selected (alone, or as one of the selected event's tracks). */
+export function isSelected(id) {
+  return id === ui.selectedId || !!ui.selectedIds?.has(id);
+}
+
 /** Clears the selected track or geolocation. */
 export function clearSelection() {
+  ui.selectedEvent = null;
+  ui.selectedIds = new Set();
   ui.selectedId = null;
   ui.following = false;
   ui.follow3d.set(null);
@@ -70,8 +96,9 @@ function renderDetail() {
     return;
   }
   const tr = ui.selectedId !== null ? store.tracks.get(ui.selectedId) : null;
+  const head = ui.selectedEvent ? eventHead(ui.selectedEvent) : null;
   if (!tr) {
-    box.replaceChildren(el("p", { class: "muted hint", text: "Click a camera image to geolocate a pixel; click a track on the map or in the list to see its history." }));
+    box.replaceChildren(...(head ? [head] : []), el("p", { class: "muted hint", text: "Click a camera image to geolocate a pixel; click a track on the map or in the list to see its history." }));
     return;
   }
   const { root, canvas } = trackDetail(tr, {
@@ -84,10 +111,51 @@ function renderDetail() {
     onExport: () => downloadTracks("geojson", [tr]),
     onClose: clearSelection,
   });
-  box.replaceChildren(root);
+  root.append(predictionBlock(tr));
+  box.replaceChildren(...(head ? [head] : []), root);
   detailCanvas = canvas;
-  detailVersion = tr.updated;
+  const pv = predictions.get(tr.id);
+  detailVersion = `${tr.updated}|${pv ? pv.t_s + pv.text : ""}`;
   drawSpeed(canvas, tr, timeline.now());
+}
+
+/** The selected event above the track's detail: what, when, and each of its tracks. */
+function eventHead(ev) {
+  return el("div", { class: "detail-event", "data-event": ev.key || "" },
+    el("div", { class: "detail-head" },
+      el("b", { text: ev.text }),
+      el("span", { class: "grow" }),
+      el("button", { onclick: clearSelection, title: "clear selection (Esc)" }, "✕")),
+    el("div", { class: "muted", text: `${fmtClock(ev.t_s)}${ev.t_end_s > ev.t_s ? `–${fmtClock(ev.t_end_s)}` : ""} UTC` }),
+    el("div", { class: "row" }, ...(ev.track_ids || []).map((id) => el("button", {
+      class: id === ui.selectedId ? "on" : "",
+      "data-track": String(id),
+      disabled: !store.tracks.has(id),
+      title: store.tracks.has(id) ? `show track ${id}` : "track not held by this page",
+      onclick: () => select(id, { keepEvent: true }),
+    }, `#${id}`))));
+}
+
+const asked = new Set(); // tracks whose prediction was asked of /api/events
+
+/** The track's hand-off prediction (an annotation, updated in place; not an event). */
+function predictionBlock(tr) {
+  const p = predictions.get(tr.id);
+  if (!p && tr.live && ui.endpoints?.events && !asked.has(tr.id)) {
+    asked.add(tr.id); // loaded before this page held the stream: ask once
+    api.getOptionalJSON(`/api/events?kind=${KIND.HANDOFF}&track=${tr.id}&limit=1`).then((r) => {
+      for (const e of r?.events || []) applyPrediction(e);
+      if (predictions.has(tr.id) && ui.selectedId === tr.id) renderDetail();
+    }).catch(() => {});
+  }
+  const text = !tr.live ? "none (track ended)" : p ? predictionText(p) : "none";
+  const t = timeline.now();
+  const age = p && tr.live
+    ? `predicted at ${fmtClock(p.t_s)} UTC${p.details?.exit_t_s < t ? " · its exit time has passed" : ""}`
+    : null;
+  return el("table", { class: "kv prediction" },
+    el("tr", {}, el("th", { text: "hand-off (predicted)" }), el("td", { "data-prediction": p ? p.key : "", text })),
+    age ? el("tr", {}, el("th", { text: "" }), el("td", { class: "muted", text: age })) : null);
 }
 
 /** From the frame loop: the selected track's detail again when DETAIL_EVERY_MS have
@@ -98,7 +166,9 @@ export function tickDetail(nowMs, t) {
   if (ui.geo || ui.selectedId === null) return;
   const tr = store.tracks.get(ui.selectedId);
   if (!tr) return;
-  if (tr.updated !== detailVersion) renderDetail();
+  const p = predictions.get(tr.id);
+  const version = `${tr.updated}|${p ? p.t_s + p.text : ""}`;
+  if (version !== detailVersion) renderDetail();
   else if (detailCanvas) drawSpeed(detailCanvas, tr, t);
 }
 
@@ -106,6 +176,8 @@ export function tickDetail(nowMs, t) {
 export async function geolocate(panel, u, v) {
   const rule = ui.rule;
   ui.selectedId = null;
+  ui.selectedEvent = null;
+  ui.selectedIds = new Set();
   ui.following = false;
   ui.follow3d.set(null);
   for (const p of ui.cams.values()) if (p !== panel) p.click = null;

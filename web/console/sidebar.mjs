@@ -3,7 +3,8 @@
 
 import { ACTIVITY_COLOUR, eventColour, KIND } from "./events.mjs";
 import { drawLists } from "./lists.mjs";
-import { timeline, ui } from "./state.mjs";
+import { HIT_COLOUR, MARKER_COLOUR, ROAD_COLOUR, SELECTED_COLOUR } from "./palette.mjs";
+import { filtersChanged, parseTrackIds, timeline, ui } from "./state.mjs";
 import { $, classColour, el } from "./util.mjs";
 
 /** Whether the layer's toggle is ticked (true before the list is built). */
@@ -15,15 +16,15 @@ export function layerChecked(name) {
 const LEGENDS = {
   tracks: [["swatch", "vehicle", "vehicle"], ["swatch", "human", "human"]],
   synopsis: [["swatch line", "#ccc", "tracked"], ["swatch dash", "#ccc", "hand-off gap"]],
-  sensors: [["swatch", "#7fdcff", "camera"]],
-  coverage: [["swatch", "rgba(120,200,255,0.35)", "ground footprint"]],
-  geolocation: [["swatch", "#ff2bd6", "terrain hit"], ["swatch", "#ffe600", "chosen hit, 1σ"]],
+  sensors: "per-sensor",
+  coverage: "per-sensor",
+  geolocation: [["swatch", HIT_COLOUR, "terrain hit"], ["swatch", SELECTED_COLOUR, "chosen hit, 1σ"]],
   events: [["swatch", eventColour(KIND.TRACK_CONFIRMED), "track confirmed"],
     ["swatch", eventColour(KIND.TRACK_ENDED), "track ended"],
     ["swatch", ACTIVITY_COLOUR, "activity (loiter, meet, convoy)"],
     ["swatch", eventColour(KIND.HANDOFF), "hand-off"]],
-  markers: [["swatch", "#ffffff", "kept marker"]],
-  roads: [["swatch line", "#f5ebc8", "road"]],
+  markers: [["swatch", MARKER_COLOUR, "kept marker"]],
+  roads: [["swatch line", ROAD_COLOUR, "road"]],
 };
 
 /** A row per map layer: its toggle, then its legend or its own controls. */
@@ -42,7 +43,11 @@ export function buildLayerList() {
     if (ui.vis.owns(name) && !root.querySelector("#vis-params")) root.append(ui.vis.paramControls());
     root.append(el("div", { class: "layer-row" }, box, el("label", { for: `layer-${name}`, text: layer.get("title") })));
     const controls = ui.vis.controls(name);
-    const legend = LEGENDS[name];
+    let legend = LEGENDS[name];
+    if (legend === "per-sensor") { // each camera in its own colour (palette.mjs)
+      const what = name === "sensors" ? "" : " footprint";
+      legend = ui.sensors.map((s) => ["swatch", ui.map.sensorColour(s.id), `${s.id}${what}`]);
+    }
     if (controls) {
       root.append(controls);
     } else if (legend) {
@@ -63,8 +68,7 @@ export function buildFilters() {
     box.addEventListener("change", () => {
       if (box.checked) ui.filters.classes.add(c);
       else ui.filters.classes.delete(c);
-      ui.filterVersion += 1;
-      ui.dirty = true;
+      filtersChanged();
       drawLists(timeline.now());
     });
     cls.append(el("label", {}, box, " ", el("span", { class: "swatch", style: `background:${classColour(c)}` }), ` ${c}`));
@@ -77,17 +81,20 @@ export function buildFilters() {
       if (box.checked) chosen.add(s.id);
       else chosen.delete(s.id);
       ui.filters.sensors = chosen.size === ui.sensors.length ? null : new Set(chosen);
-      ui.filterVersion += 1;
-      ui.dirty = true;
+      filtersChanged();
       drawLists(timeline.now());
     });
     sens.append(el("label", {}, box, ` ${s.id}`));
   }
-  $("#filter-track").addEventListener("input", (ev) => {
-    const ids = ev.target.value.split(/[\s,;]+/).filter(Boolean).map(Number).filter(Number.isInteger);
-    ui.filters.ids = ids.length ? new Set(ids) : null;
-    ui.filterVersion += 1;
-    ui.dirty = true;
+  const idField = $("#filter-track");
+  idField.addEventListener("input", () => {
+    const { ids, error } = parseTrackIds(idField.value);
+    ui.filters.ids = ids;
+    ui.filters.idError = error;
+    idField.classList.toggle("invalid", !!error);
+    idField.setAttribute("aria-invalid", String(!!error));
+    $("#filter-track-error").textContent = error || "";
+    filtersChanged();
     drawLists(timeline.now());
   });
 }

@@ -1,8 +1,10 @@
 // The live stream: /ws with resume after a drop, reconnecting by itself.
 //
 // Each stored message has a `seq`; after a drop the client reconnects with `?since=<last
-// seq seen>` and the server sends what was missed first, so nothing is lost. If the
-// server's newest seq is below ours (a fresh database), the store starts over.
+// seq seen>&store=<the store id of its hello>` and the server sends what was missed first,
+// so nothing is lost. Sequence numbers belong to one store (database): when the hello
+// names another store than ours, says `start_over` (our `since` cannot be resumed), or its
+// newest seq is below ours, the page's store starts over from the server's state.
 //
 // The page connects with `batch=1`: when several messages wait on the server, they come in
 // one frame, `{"type": "batch", "messages": [...]}`, and are applied one by one in order,
@@ -20,6 +22,8 @@ export class Stream {
   constructor(handlers) {
     this.h = handlers;
     this.lastSeq = null;
+    this.storeId = null; // the store our seqs belong to (from the first hello)
+    this.nResets = 0; // times the page started over (a new store)
     this.ws = null;
     this.delay = MIN_DELAY_MS;
     this.closed = false;
@@ -39,7 +43,11 @@ export class Stream {
     this.h.onStatus(this.lastSeq === null ? "connecting" : "reconnecting");
     let ws;
     try {
-      ws = new WebSocket(wsURL(this.lastSeq, { batch: true }));
+      let url = wsURL(this.lastSeq, { batch: true });
+      if (this.lastSeq !== null && this.storeId !== null) {
+        url += `&store=${encodeURIComponent(this.storeId)}`;
+      }
+      ws = new WebSocket(url);
     } catch (err) {
       this.retry();
       return;
@@ -95,13 +103,21 @@ export class Stream {
   apply(msg) {
     if (msg.type === "hello") {
       this.delay = MIN_DELAY_MS;
-      if (this.lastSeq !== null && msg.last_seq < this.lastSeq) {
-        // The server forgot what we saw (new database): start over from its state.
+      const otherStore =
+        this.storeId !== null && msg.store_id !== undefined && msg.store_id !== this.storeId;
+      if (
+        this.lastSeq !== null &&
+        (msg.start_over || otherStore || msg.last_seq < this.lastSeq)
+      ) {
+        // Our seqs mean nothing here (a new database): start over from the server's state;
+        // it sends what comes after its newest message.
         this.lastSeq = msg.last_seq;
+        this.nResets += 1;
         this.h.onReset(msg);
       } else if (this.lastSeq === null) {
         this.lastSeq = msg.last_seq;
       }
+      if (msg.store_id !== undefined) this.storeId = msg.store_id;
       this.h.onHello(msg);
       this.h.onStatus("live");
       return;

@@ -2,9 +2,10 @@
 //
 // `live`: the shown time follows the newest data. Otherwise the shown time is `t`, which
 // advances at `speed` times real time while playing; playing into the newest data goes
-// live again.
+// live again. The label shows clock time (UTC; times inside are UNIX seconds).
 
-import { $, fmtT } from "./util.mjs";
+import { fmtClock } from "./events.mjs";
+import { $ } from "./util.mjs";
 
 const PLAY_SVG = '<svg viewBox="0 0 16 16" width="14" height="14" aria-label="play"><polygon points="3,2 14,8 3,14" fill="currentColor"/></svg>';
 const PAUSE_SVG = '<svg viewBox="0 0 16 16" width="14" height="14" aria-label="pause"><rect x="3" y="2" width="4" height="12" fill="currentColor"/><rect x="9" y="2" width="4" height="12" fill="currentColor"/></svg>';
@@ -110,7 +111,7 @@ export class Timeline {
     this.scrub.max = String(b);
     const t = this.now();
     if (!this.scrubbing) this.scrub.value = String(t);
-    this.label.textContent = `${fmtT(t)} / ${fmtT(b)}`;
+    this.label.textContent = `${fmtClock(t)} / ${fmtClock(b)} UTC`; // clock time, never session seconds
     const on = this.live || this.playing;
     if (this.play.dataset.on !== String(on)) {
       this.play.dataset.on = String(on);

@@ -1,15 +1,7 @@
-// Small shared helpers: class colours, number and time formatting, DOM shortcuts.
+// Small shared helpers: number and time formatting, DOM shortcuts.
 
-export const CLASS_COLOURS = {
-  vehicle: "#ff7a1a",
-  human: "#1ad0ff",
-};
-export const SELECTED_COLOUR = "#ffe600";
-export const HIT_COLOUR = "#ff2bd6";
-
-export function classColour(cls) {
-  return CLASS_COLOURS[cls] || "#cccccc";
-}
+// The colours live in palette.mjs (one meaning per colour); re-exported for older imports.
+export { CLASS_COLOURS, classColour, HIT_COLOUR, SELECTED_COLOUR } from "./palette.mjs";
 
 export function $(sel, root = document) {
   return root.querySelector(sel);

@@ -23,10 +23,11 @@
 
 /* global ol */
 import * as api from "./api.mjs";
+import { BLIND_COLOUR, SENSOR_COLOURS, withAlpha } from "./palette.mjs";
 import { el, fmt } from "./util.mjs";
 
-/** Outline colours of the sensors, by sorted id (the 3D scene's frustum colours). */
-export const SENSOR_COLOURS = ["#ffd700", "#00c8ff", "#ff69b4", "#a0ff78"];
+/** Outline colours of the sensors, by sorted id: the cameras' own colours (palette.mjs). */
+export { SENSOR_COLOURS };
 /** Target classes, as core/visibility/target_heights.py TARGET_HEIGHT_M (a browser test checks the copy). */
 export const TARGETS = [
   { cls: "human", label: "person", height_m: 1.7 },
@@ -37,7 +38,6 @@ export const DEFAULT_PARAMS = Object.freeze({ target: "human", target_height_m: 
 const LAYERS = ["visibility", "viewsheds", "blindspots"];
 /** The localStorage key of the operator's parameter set. */
 export const PARAMS_KEY = "demtrack.visibility.params";
-const BLIND_COLOUR = "#ff4040";
 
 /** The query string of a parameter set. */
 export function paramQuery(p) {
@@ -396,14 +396,14 @@ export class VisibilityLayers {
     if (f.get("kind") === "outline" || f.get("kind") === "bbox") {
       return new ol.style.Style({
         stroke: new ol.style.Stroke({ color: BLIND_COLOUR, width: 1.5, lineDash: [5, 4] }),
-        fill: new ol.style.Fill({ color: "rgba(255,64,64,0.08)" }),
+        fill: new ol.style.Fill({ color: withAlpha(BLIND_COLOUR, 0.1) }),
       });
     }
     return new ol.style.Style({
       image: new ol.style.Circle({ radius: 4, fill: new ol.style.Fill({ color: BLIND_COLOUR }), stroke: new ol.style.Stroke({ color: "#000", width: 1 }) }),
       text: new ol.style.Text({
         text: f.get("label"), font: "bold 11px system-ui, sans-serif", offsetY: -11,
-        fill: new ol.style.Fill({ color: "#ffd0d0" }), stroke: new ol.style.Stroke({ color: "rgba(0,0,0,0.85)", width: 3 }),
+        fill: new ol.style.Fill({ color: "#e6e6e6" }), stroke: new ol.style.Stroke({ color: "rgba(0,0,0,0.85)", width: 3 }),
       }),
     });
   }

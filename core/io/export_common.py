@@ -1,0 +1,261 @@
+"""What every track export shares: heights, times and the runs between gaps.
+
+A track is prepared once (:func:`prepare_tracks`) into an :class:`ExportTrack`: WGS84
+``lat/lon``, the ellipsoidal height ``h`` (GeoJSON's third coordinate, GeoPackage z), the
+*absolute* height the sea-level formats want (KML ``absolute``, GPX ``<ele>``), each
+point's ISO 8601 UTC time, and the point indices of its runs between gaps (each run is
+written as its own segment, never a straight line across the gap).
+
+Heights follow a :class:`HeightModel`: with a geoid model the absolute height is the
+orthometric ``H = h - N(lat, lon)``; without one it is the ellipsoidal ``h``, and every
+file says so (:attr:`HeightModel.note`). The model takes a vectorised function, so a
+per-point geoid grid (EGM96) can be fed in without touching the writers.
+
+Times follow a :class:`TimeBase`: a point's time is ``epoch + t_s``. When the store's
+``t_s`` are UNIX seconds the epoch is 1970-01-01T00:00:00Z and the times are wall-clock
+times; when they are session seconds the epoch is declared (given by the caller or the
+UNIX epoch by default) and every file says the times are relative to it.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import TrackingError
+from ..tracking.types import Track
+
+__all__ = [
+    "UNIX_EPOCH",
+    "ExportTrack",
+    "HeightModel",
+    "OrthometricFn",
+    "TimeBase",
+    "ToGeodetic",
+    "iso_utc",
+    "prepare_tracks",
+    "split_at_gaps",
+]
+
+#: ``(e_m, n_m, u_m) -> (lat_deg, lon_deg, h_m)``, h above the WGS84 ellipsoid.
+ToGeodetic = Callable[[float, float, float], tuple[float, float, float]]
+#: ``(lat_deg, lon_deg, h_m) -> H_m``: arrays of shape (n,) in, orthometric heights out.
+OrthometricFn = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+UNIX_EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
+
+
+def _check_epoch(epoch: datetime | None) -> None:
+    if epoch is not None and epoch.utcoffset() is None:
+        raise TrackingError("epoch must be timezone-aware (e.g. datetime(..., tzinfo=UTC))")
+
+
+def _when(epoch: datetime, t_s: float) -> datetime:
+    # Milliseconds: what every format here writes, so GPX, KML and GeoPackage agree.
+    return (epoch + timedelta(milliseconds=round(float(t_s) * 1000.0))).astimezone(UTC)
+
+
+def iso_utc(epoch: datetime, t_s: float) -> str:
+    """ISO 8601 UTC time of ``epoch + t_s`` with millisecond precision, ``Z`` suffix."""
+    _check_epoch(epoch)
+    when = _when(epoch, t_s)
+    return when.strftime("%Y-%m-%dT%H:%M:%S.") + f"{when.microsecond // 1000:03d}Z"
+
+
+def split_at_gaps(track: Track) -> list[list[int]]:
+    """Point indices of the track's runs between gaps (each run non-empty)."""
+    runs: list[list[int]] = []
+    t = track.t_s
+    for i in range(len(t)):
+        if i == 0 or any(a <= t[i - 1] and t[i] <= b for a, b in track.gaps):
+            runs.append([])
+        runs[-1].append(i)
+    return runs
+
+
+@dataclass(frozen=True)
+class HeightModel:
+    """How exports get sea-level (orthometric) heights from ellipsoidal ones.
+
+    Parameters
+    ----------
+    geoid : str or None
+        Name of the geoid model (``"EGM96"``, ``"site constant N = -33.4 m"``); None when
+        the site has none, and the absolute heights are then the ellipsoidal ones.
+    to_orthometric : callable or None
+        ``(lat_deg, lon_deg, h_m) -> H_m`` on arrays of shape (n,); required with ``geoid``.
+    """
+
+    geoid: str | None = None
+    to_orthometric: OrthometricFn | None = None
+
+    def __post_init__(self) -> None:
+        if (self.geoid is None) != (self.to_orthometric is None):
+            raise TrackingError("a HeightModel needs both a geoid name and its function")
+
+    @classmethod
+    def constant_undulation(cls, n_m: float, name: str | None = None) -> HeightModel:
+        """``H = h - N`` with one undulation ``N`` (m) for the whole site."""
+        n = float(n_m)
+        if not np.isfinite(n):
+            raise TrackingError(f"geoid undulation must be finite, got {n_m!r}")
+        label = name or f"the site's constant geoid undulation N = {n:g} m"
+        return cls(label, lambda lat, lon, h: np.asarray(h, dtype=float) - n)
+
+    @classmethod
+    def geoid_grid(cls, path: str | os.PathLike[str], name: str | None = None) -> HeightModel:
+        """``H = h - N(lat, lon)`` with ``N`` from a PROJ vertical grid (EGM96: egm96_15.gtx).
+
+        The grid is evaluated at each point (bilinear, by PROJ's ``vgridshift``).
+        """
+        from pyproj import Transformer
+
+        grid = Path(path)
+        if not grid.is_file():
+            raise TrackingError(f"geoid grid {grid} does not exist")
+        # vgridshift gives z + multiplier * N: -1 for H = h - N.
+        pipeline = (
+            "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad"
+            f" +step +proj=vgridshift +grids={grid} +multiplier=-1"
+            " +step +proj=unitconvert +xy_in=rad +xy_out=deg"
+        )
+        # One transformer per model: pyproj transformers are not shared between threads,
+        # and a model serves one export.
+        tr = Transformer.from_pipeline(pipeline)
+
+        def to_orthometric(lat: np.ndarray, lon: np.ndarray, h: np.ndarray) -> np.ndarray:
+            _, _, big_h = tr.transform(np.asarray(lon), np.asarray(lat), np.asarray(h))
+            return np.asarray(big_h, dtype=float)
+
+        return cls(name or f"{grid.stem} ({grid.name}, evaluated at each point)", to_orthometric)
+
+    @classmethod
+    def for_site(cls, geoid_undulation_m: float | None) -> HeightModel:
+        """A site's model: its stated constant ``N``, or none when it states ``N = 0``.
+
+        (``site.json`` defaults ``geoid_undulation_m`` to 0, so 0 reads as "not known".)
+        """
+        n = float(geoid_undulation_m or 0.0)
+        return cls.constant_undulation(n) if n != 0.0 else cls()
+
+    @property
+    def orthometric(self) -> bool:
+        """Whether absolute heights are sea-level heights (a geoid model is known)."""
+        return self.to_orthometric is not None
+
+    def absolute(self, lat_deg: np.ndarray, lon_deg: np.ndarray, h_m: np.ndarray) -> np.ndarray:
+        """Heights for KML ``absolute`` and GPX ``<ele>``: orthometric, else ellipsoidal."""
+        h = np.asarray(h_m, dtype=float)
+        if self.to_orthometric is None:
+            return h.copy()
+        out = np.asarray(self.to_orthometric(lat_deg, lon_deg, h), dtype=float)
+        if out.shape != h.shape or not np.all(np.isfinite(out)):
+            raise TrackingError("the geoid model gave no finite height for every point")
+        return out
+
+    @property
+    def note(self) -> str:
+        """One sentence saying what the absolute heights are."""
+        if self.to_orthometric is None:
+            return (
+                "no geoid model at this site: absolute heights (KML absolute altitude, GPX ele)"
+                " are metres above the WGS84 ellipsoid, not above sea level"
+            )
+        return (
+            f"absolute heights (KML absolute altitude, GPX ele, elevation_m) are orthometric"
+            f" metres above sea level, H = h - N with N from {self.geoid}"
+        )
+
+
+@dataclass(frozen=True)
+class TimeBase:
+    """The UTC time of ``t_s = 0`` and whether ``t_s`` are clock readings.
+
+    Parameters
+    ----------
+    epoch : datetime
+        Timezone-aware time of ``t_s = 0``.
+    wall_clock : bool
+        True when ``epoch + t_s`` is the real time (``t_s`` UNIX seconds, or the session's
+        real start given); False when the epoch is only declared.
+    """
+
+    epoch: datetime = UNIX_EPOCH
+    wall_clock: bool = False
+
+    def __post_init__(self) -> None:
+        _check_epoch(self.epoch)
+
+    def iso(self, t_s: float) -> str:
+        """ISO 8601 UTC time of ``t_s`` (milliseconds, ``Z``)."""
+        return iso_utc(self.epoch, t_s)
+
+    def datetime(self, t_s: float) -> datetime:
+        """The UTC :class:`datetime` of ``t_s`` (milliseconds)."""
+        return _when(self.epoch, t_s)
+
+    @property
+    def epoch_iso(self) -> str:
+        """The epoch as ISO 8601 UTC."""
+        return iso_utc(self.epoch, 0.0)
+
+    @property
+    def note(self) -> str:
+        """One sentence saying what the times are."""
+        if self.wall_clock:
+            return f"times are UTC (t_s seconds after {self.epoch_iso})"
+        return (
+            f"times are t_s session seconds after the declared epoch {self.epoch_iso},"
+            " not clock readings: the store has no wall-clock time"
+        )
+
+
+@dataclass(frozen=True)
+class ExportTrack:
+    """One track ready to write: arrays of shape (n,) and its runs between gaps."""
+
+    track: Track
+    lat_deg: np.ndarray
+    lon_deg: np.ndarray
+    h_m: np.ndarray
+    abs_h_m: np.ndarray
+    times_utc: tuple[str, ...]
+    runs: tuple[tuple[int, ...], ...]
+
+    @property
+    def t_s(self) -> list[float]:
+        """Point times (s, the store's clock)."""
+        return [float(p.t_s) for p in self.track.points]
+
+
+def prepare_tracks(
+    tracks: Sequence[Track],
+    to_geodetic: ToGeodetic,
+    heights: HeightModel,
+    times: TimeBase,
+) -> list[ExportTrack]:
+    """Geodetic positions, absolute heights, times and runs of every non-empty track."""
+    out: list[ExportTrack] = []
+    for track in tracks:
+        if not track.points:
+            continue
+        geo = np.array(
+            [[float(v) for v in to_geodetic(*(float(c) for c in p))] for p in track.p_enu]
+        ).reshape(-1, 3)
+        lat, lon, h = geo[:, 0], geo[:, 1], geo[:, 2]
+        out.append(
+            ExportTrack(
+                track,
+                lat,
+                lon,
+                h,
+                heights.absolute(lat, lon, h),
+                tuple(times.iso(p.t_s) for p in track.points),
+                tuple(tuple(r) for r in split_at_gaps(track)),
+            )
+        )
+    return out

@@ -1,0 +1,171 @@
+"""``/api/markers``: the points operators keep, stored and streamed to every console.
+
+``GET`` lists them (reader), ``POST`` keeps one, ``PATCH /{id}`` renames or notes one and
+``DELETE /{id}`` removes one (operator token); each change is streamed as a ``marker``
+message. ``GET /api/markers/export``
+writes them as GeoJSON (RFC 7946, ``[lon, lat, h]``, h above the WGS84 ellipsoid) or CSV
+(``longitude``/``latitude`` columns, which GDAL and QGIS detect).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from typing import Any, Literal
+
+from fastapi import APIRouter, Path, Query
+from fastapi.responses import Response
+from pydantic import BaseModel, ConfigDict, Field
+
+from .. import markers
+from ..markers import MAX_T_S
+from ..messages import MarkerBody
+from .deps import OPERATOR, READER, StateDep
+
+__all__ = ["MarkerEdit", "MarkerIn", "MarkersOut", "router"]
+
+router = APIRouter(prefix="/api/markers", tags=["markers"])
+
+
+class MarkerIn(BaseModel):
+    """A marker to keep: its moment, name, note and position (site frame or WGS84)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    t_s: float = Field(
+        ge=0,
+        le=MAX_T_S,
+        allow_inf_nan=False,
+        description="the moment it marks (UNIX s, UTC; up to 9999-12-31)",
+    )
+    name: str = Field("", max_length=200, description="default M<id>")
+    note: str = Field("", max_length=4000)
+    e_m: float | None = Field(None, allow_inf_nan=False, description="site frame east (m)")
+    n_m: float | None = Field(None, allow_inf_nan=False, description="site frame north (m)")
+    u_m: float | None = Field(
+        None, allow_inf_nan=False, description="site frame up (m); default the DEM surface"
+    )
+    lat_deg: float | None = Field(None, ge=-90, le=90, allow_inf_nan=False)
+    lon_deg: float | None = Field(None, ge=-180, le=180, allow_inf_nan=False)
+    h_m: float | None = Field(
+        None, allow_inf_nan=False, description="above the WGS84 ellipsoid (m); default 0"
+    )
+    source: dict[str, Any] = Field(
+        default_factory=dict, description="provenance, e.g. {sensor, pixel, rule}"
+    )
+
+
+class MarkerEdit(BaseModel):
+    """A marker's new name and/or note (fields left out stay as they are)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    name: str | None = Field(None, max_length=200, description="empty: M<id>")
+    note: str | None = Field(None, max_length=4000)
+
+
+class MarkersOut(BaseModel):
+    """Every stored marker, oldest first."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    markers: list[MarkerBody]
+
+
+@router.get("", response_model=MarkersOut, summary="Markers", dependencies=READER)
+def list_markers(state: StateDep) -> dict[str, Any]:
+    """Every stored marker, oldest first."""
+    return {"markers": markers.stored_markers(state)}
+
+
+@router.post(
+    "",
+    response_model=MarkerBody,
+    status_code=201,
+    summary="Keep a marker",
+    dependencies=OPERATOR,
+    responses={422: {"description": "no position, both positions, or no DEM surface there"}},
+)
+def create_marker(state: StateDep, body: MarkerIn) -> dict[str, Any]:
+    """Store a marker and stream it (``marker``, ``action: add``) to every console."""
+    return markers.create_marker(state, body.model_dump())
+
+
+_MARKER_ID = Path(ge=1, le=2**62)
+
+
+@router.patch(
+    "/{marker_id}",
+    response_model=MarkerBody,
+    summary="Rename or note a marker",
+    dependencies=OPERATOR,
+    responses={404: {"description": "no such marker"}},
+)
+def edit_marker(state: StateDep, body: MarkerEdit, marker_id: int = _MARKER_ID) -> dict[str, Any]:
+    """Change the name and/or note; streamed (``marker``, ``action: update``)."""
+    fields = body.model_dump(exclude_none=True)
+    if "name" in fields:
+        fields["name"] = fields["name"].strip()
+    return markers.edit_marker(state, marker_id, fields)
+
+
+@router.delete(
+    "/{marker_id}",
+    status_code=204,
+    summary="Remove a marker",
+    dependencies=OPERATOR,
+    responses={404: {"description": "no such marker"}},
+)
+def delete_marker(state: StateDep, marker_id: int = _MARKER_ID) -> Response:
+    """Remove a marker and stream it (``marker``, ``action: delete``)."""
+    markers.remove_marker(state, marker_id)
+    return Response(status_code=204)
+
+
+_CSV_COLUMNS = (
+    "id",
+    "name",
+    "time_utc",
+    "t_s",
+    "longitude",
+    "latitude",
+    "h_m",
+    "e_m",
+    "n_m",
+    "u_m",
+    "mgrs",
+    "note",
+)
+
+
+@router.get(
+    "/export",
+    summary="Markers as GeoJSON or CSV",
+    dependencies=READER,
+    response_class=Response,
+    responses={200: {"content": {"application/geo+json": {}, "text/csv": {}}}},
+)
+def export_markers(
+    state: StateDep, fmt: Literal["geojson", "csv"] = Query("geojson", alias="format")
+) -> Response:
+    """Every marker: GeoJSON (``[lon, lat, h]``, h above the WGS84 ellipsoid) or CSV."""
+    if fmt == "geojson":
+        import json
+
+        text = json.dumps(markers.markers_geojson(state), indent=1)
+        return Response(
+            text,
+            media_type="application/geo+json",
+            headers={"Content-Disposition": 'attachment; filename="markers.geojson"'},
+        )
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(_CSV_COLUMNS)
+    for m in markers.stored_markers(state):
+        row = {**m, "longitude": m["lon_deg"], "latitude": m["lat_deg"]}
+        w.writerow([row[c] for c in _CSV_COLUMNS])
+    return Response(
+        buf.getvalue(),
+        media_type="text/csv",
+        headers={"Content-Disposition": 'attachment; filename="markers.csv"'},
+    )
