@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 from demtrack.core.errors import InputFileError
 
 from .choices import SCENARIO_DEFAULTS, SCENARIO_NAMES
-from .common import add_site_argument, non_negative, non_negative_int, probability
+from .common import add_site_argument, non_negative, non_negative_int
 
 if TYPE_CHECKING:
     from demtrack.samplesite.scenarios import ScenarioParams
@@ -30,7 +30,7 @@ def add_scenario_parameters(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--p-miss",
-        type=probability,
+        type=float,  # checked in _run, so a mistake is a returned status 2 like the others
         default=d.p_miss,
         metavar="P",
         help=f"missed-detection probability (default {d.p_miss})",
@@ -60,6 +60,8 @@ def params_from_args(args: argparse.Namespace) -> ScenarioParams:
 
 
 def _run(args: argparse.Namespace) -> int:
+    if not 0.0 <= args.p_miss <= 1.0:
+        raise InputFileError(f"--p-miss must be a probability within 0..1, got {args.p_miss:g}")
     out = Path(args.output)
     suffix = out.suffix.lower()
     if suffix not in (".csv", ".jsonl", ".ndjson"):
