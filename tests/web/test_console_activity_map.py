@@ -105,13 +105,13 @@ def test_each_activity_kind_is_drawn_as_itself(activity_server, page):
     assert recent != {e["key"] for e in evs}, "some episode should end over a minute earlier"
     wait_until(
         lambda: {i["key"] for i in page.evaluate("window.demtrack.activity.items")} == recent,
-        timeout_s=10,
+        timeout_s=30,
         page=page,
     )
     page.select_option("#syn-window", "Infinity")
     wait_until(
         lambda: len(page.evaluate("window.demtrack.activity.items")) == len(evs),
-        timeout_s=10,
+        timeout_s=30,
         page=page,
     )
     # no purple star stands in for them any more
@@ -131,7 +131,7 @@ def test_each_activity_kind_is_drawn_as_itself(activity_server, page):
             )
             == ["rendezvous"] * sum(e["kind"] == "rendezvous" for e in evs)
         ),
-        timeout_s=10,
+        timeout_s=30,
         page=page,
     )
     texts = page.evaluate(
@@ -149,14 +149,25 @@ def test_each_activity_kind_is_drawn_as_itself(activity_server, page):
             "sel" in (page.get_attribute(f"#track-list > div[data-track='{tid}']", "class") or "")
             for tid in rdv["track_ids"]
         ),
-        timeout_s=10,
+        timeout_s=30,
         page=page,
     )
     # the selected episode is drawn in the selection colour with its tracks' paths
-    roles = page.evaluate(
-        "window.demtrack.activity.layer.getSource().getFeatures()"
-        ".filter(f => f.get('sel')).map(f => f.get('role'))"
-    )
+    def _drawn(roles: list) -> list | None:
+        return roles if "link" in roles and roles.count("path") == 2 else None
+
+    def selected_roles() -> list:
+        return page.evaluate(
+            "window.demtrack.activity.layer.getSource().getFeatures()"
+            ".filter(f => f.get('sel')).map(f => f.get('role'))"
+        )
+
+    # the layer redraws on the page's next frame after the click: wait for it
+    roles = wait_until(
+        lambda: _drawn(selected_roles()),
+        timeout_s=30,
+        page=page,
+    ) or selected_roles()
     assert "link" in roles and roles.count("path") == 2
     page.evaluate(
         "(() => { const m = window.demtrack.map; const s = m.map.getLayers().getArray()"
