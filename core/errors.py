@@ -16,6 +16,7 @@ __all__ = [
     "DemtrackError",
     "DetectionError",
     "GeodesyError",
+    "GeoidError",
     "InputFileError",
     "NotFoundError",
     "QueryError",
@@ -41,6 +42,10 @@ class QueryError(DemtrackError, ValueError):
 
 class GeodesyError(DemtrackError, ValueError):
     """Invalid geodetic input (latitude out of range, non-finite height, ...)."""
+
+
+class GeoidError(DemtrackError, ValueError):
+    """A geoid model that cannot be used: its grid missing or unreadable, a point off it."""
 
 
 class CrsError(DemtrackError, ValueError):
