@@ -12,10 +12,22 @@ Manifest::
 
     {"format": "demtrack.site", "version": 1, "name": "...",
      "frame": {"lat_deg", "lon_deg", "h_m", "crs": "EPSG:4979"},
-     "geoid_undulation_m": N,             # stated, h = H + N for orthometric inputs
+     "vertical_datum": {"geoid": "EGM96"},  # the geoid of orthometric heights, below
+     "geoid_undulation_m": N,             # N at the anchor (the constant, for old readers)
      "dem": "dem.tif", "orthophoto": "ortho.tif", "roads": "roads.geojson",
      "sensors": [{"id": "cam1", "name": "...", "head": {PanTiltHead.to_dict()},
                   "pan_deg": p, "tilt_deg": t, "image": "images/cam1.png"}]}
+
+Vertical datum (``h = H + N(lat, lon)``; see :mod:`~demtrack.core.geo.geoid`)::
+
+    {"geoid": "EGM96"}                       # PROJ's egm96_15.gtx, evaluated per point
+    {"geoid": "grid", "grid": "geoid/g.tif", "name": "GEOID18"}  # a grid in the folder
+    {"geoid": "constant", "undulation_m": -33.5}
+    {"geoid": "none"}                        # ellipsoidal: no geoid model
+
+A manifest without ``vertical_datum`` (older sites) keeps its meaning: a non-zero
+``geoid_undulation_m`` is a constant model, 0 is none. A site that asks for a grid that is
+not there does not load (:class:`~demtrack.core.errors.SiteError` naming the grid).
 """
 
 from __future__ import annotations
@@ -24,7 +36,7 @@ import functools
 import json
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +44,7 @@ from ..camera.pantilt import PanTiltHead
 from ..camera.pinhole import Camera
 from ..errors import DemtrackError, SiteError, UnknownSensorError
 from ..geo.geodesy import LocalFrame
+from ..geo.geoid import EGM96_GRID, GeoidModel
 from ..geolocation.geolocate import Geolocator
 from ..geolocation.roads import RoadNetwork
 from ..terrain.dem import Dem
@@ -45,6 +58,7 @@ __all__ = [
     "Site",
     "load_site",
     "site_manifest",
+    "vertical_datum_doc",
 ]
 
 SITE_FORMAT = "demtrack.site"
@@ -100,7 +114,12 @@ class Sensor:
 
 @dataclass(frozen=True, eq=False)
 class Site:
-    """A loaded site: frame, DEM, optional orthophoto and roads, and sensors."""
+    """A loaded site: frame, DEM, optional orthophoto and roads, and sensors.
+
+    ``geoid`` is the site's vertical datum (the geoid of its orthometric heights, or
+    ellipsoidal); ``geoid_undulation_m`` is that model's ``N`` (m) at the frame's anchor,
+    for code that takes one constant.
+    """
 
     root: Path
     name: str
@@ -110,6 +129,7 @@ class Site:
     roads: RoadNetwork | None = None
     orthophoto_path: Path | None = None
     geoid_undulation_m: float = 0.0
+    geoid: GeoidModel = field(default_factory=GeoidModel.ellipsoidal)
 
     def sensor(self, sensor_id: str) -> Sensor:
         """The sensor called ``sensor_id``.
@@ -172,6 +192,53 @@ def _sensor(root: Path, doc: Any, k: int) -> Sensor:
     )
 
 
+def vertical_datum_doc(geoid: GeoidModel, root: Path) -> dict[str, Any]:
+    """The manifest's ``vertical_datum`` entry for ``geoid`` (a grid inside ``root``)."""
+    if geoid.kind == "ellipsoidal":
+        return {"geoid": "none"}
+    if geoid.kind == "constant":
+        return {"geoid": "constant", "undulation_m": geoid.n_m}
+    if geoid.name == "EGM96" and geoid.grid_path is not None and geoid.grid_path.name == EGM96_GRID:
+        return {"geoid": "EGM96"}
+    grid = Path(geoid.grid_path)  # type: ignore[arg-type]  # a grid model has one
+    try:
+        rel = grid.resolve().relative_to(Path(root).resolve())
+    except ValueError:
+        raise SiteError(f"the geoid grid {grid} must be inside the site folder {root}") from None
+    return {"geoid": "grid", "grid": rel.as_posix(), "name": geoid.name}
+
+
+def _geoid(root: Path, doc: Mapping[str, Any]) -> GeoidModel:
+    """The site's geoid model from ``vertical_datum`` (or the old constant N)."""
+    vd = doc.get("vertical_datum")
+    if vd is None:
+        n = _number(doc, "geoid_undulation_m", "site.json", 0.0)
+        return GeoidModel.constant(n) if n != 0.0 else GeoidModel.ellipsoidal()
+    if not isinstance(vd, Mapping):
+        raise SiteError(
+            'site.json: \'vertical_datum\' must be an object such as {"geoid": "EGM96"}'
+        )
+    kind = vd.get("geoid")
+    try:
+        if kind == "none":
+            return GeoidModel.ellipsoidal()
+        if kind == "constant":
+            return GeoidModel.constant(_number(vd, "undulation_m", "site.json: vertical_datum"))
+        if isinstance(kind, str) and kind.upper() == "EGM96":
+            return GeoidModel.egm96()
+        if kind == "grid":
+            path = _inside(root, vd.get("grid"), "vertical_datum.grid")
+            name = vd.get("name")
+            return GeoidModel.from_grid(path, name if isinstance(name, str) and name else None)
+    except SiteError:
+        raise
+    except DemtrackError as exc:
+        raise SiteError(f"site.json: vertical_datum: {exc}") from None
+    raise SiteError(
+        f"site.json: vertical_datum: 'geoid' must be EGM96, grid, constant or none, got {kind!r}"
+    )
+
+
 def load_site(root: str | Path) -> Site:
     """Load and check a site folder.
 
@@ -220,6 +287,11 @@ def load_site(root: str | Path) -> Site:
         if sensor.id in sensors:
             raise SiteError(f"site.json: sensor id {sensor.id!r} appears twice")
         sensors[sensor.id] = sensor
+    geoid = _geoid(root, doc)
+    try:
+        n_anchor = float(geoid.undulation_m(frame.lat_deg, frame.lon_deg))
+    except DemtrackError as exc:
+        raise SiteError(f"site.json: vertical_datum: {exc}") from None
     return Site(
         root,
         str(doc.get("name", root.name)),
@@ -228,7 +300,8 @@ def load_site(root: str | Path) -> Site:
         sensors,
         roads,
         ortho,
-        _number(doc, "geoid_undulation_m", "site.json", 0.0),
+        n_anchor,
+        geoid,
     )
 
 
@@ -242,17 +315,27 @@ def site_manifest(
     orthophoto: str | None = "ortho.tif",
     roads: str | None = "roads.geojson",
     geoid_undulation_m: float = 0.0,
+    geoid: GeoidModel | None = None,
     extra: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """Build the ``site.json`` document for a site written to ``root``."""
+    """Build the ``site.json`` document for a site written to ``root``.
+
+    With ``geoid`` the manifest states its ``vertical_datum`` and ``geoid_undulation_m``
+    is that model's ``N`` at the anchor (rounded to 1 mm); without it only the constant
+    ``geoid_undulation_m`` is written (the old form).
+    """
     doc: dict[str, Any] = {
         "format": SITE_FORMAT,
         "version": SITE_FORMAT_VERSION,
         "name": site_name,
         "frame": frame.to_dict(),
-        "geoid_undulation_m": geoid_undulation_m,
-        "dem": dem,
     }
+    if geoid is not None:
+        doc["vertical_datum"] = vertical_datum_doc(geoid, root)
+        n_anchor = geoid.undulation_m(frame.lat_deg, frame.lon_deg)
+        geoid_undulation_m = round(float(n_anchor), 3)
+    doc["geoid_undulation_m"] = geoid_undulation_m
+    doc["dem"] = dem
     if orthophoto:
         doc["orthophoto"] = orthophoto
     if roads:

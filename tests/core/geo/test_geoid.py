@@ -9,44 +9,15 @@ Cesium's grid-derived values (0.01 m).
 
 from __future__ import annotations
 
-import struct
-from pathlib import Path
-
 import numpy as np
 import pytest
-import rasterio
-from rasterio.transform import from_origin
+from geoid_oracle import rasterio_bilinear, write_gtx, write_linear_tif
 
 from demtrack.core.errors import DemtrackError, GeoidError
 from demtrack.core.geo.geoid import EGM96_GRID, GeoidModel, as_geoid, find_grid
 
 EGM96_PATH = find_grid(EGM96_GRID)
 needs_egm96 = pytest.mark.skipif(EGM96_PATH is None, reason="Debian's proj-data is not installed")
-
-
-def rasterio_bilinear(path: Path, lat_deg: np.ndarray, lon_deg: np.ndarray) -> np.ndarray:
-    """Bilinear N between the grid's nodes, read with rasterio; longitudes wrap for global grids."""
-    with rasterio.open(path) as ds:
-        n = ds.read(1).astype(np.float64)
-        t = ds.transform
-    # Node (row i, column j) sits at the centre of GDAL's pixel (i, j).
-    lon0, lat0, dlon, dlat = t.c + t.a / 2, t.f + t.e / 2, t.a, -t.e
-    rows, cols = n.shape
-    x = np.mod(np.asarray(lon_deg) - lon0, 360.0) / dlon  # .gtx may run 0..360 deg east
-    y = (lat0 - np.asarray(lat_deg)) / dlat
-    global_lon = abs(cols * dlon - 360.0) < 1e-9
-    if global_lon:
-        x = np.mod(x, cols)
-    j = np.clip(np.floor(x).astype(int), 0, cols - 1 if global_lon else cols - 2)
-    i = np.clip(np.floor(y).astype(int), 0, rows - 2)
-    fx, fy = x - j, y - i
-    j1 = (j + 1) % cols if global_lon else j + 1
-    return (
-        n[i, j] * (1 - fx) * (1 - fy)
-        + n[i, j1] * fx * (1 - fy)
-        + n[i + 1, j] * (1 - fx) * fy
-        + n[i + 1, j1] * fx * fy
-    )
 
 
 @needs_egm96
@@ -102,29 +73,9 @@ def test_bushy_run_undulation_and_the_height_round_trip():
     assert g.orthometric and g.datum == "EGM96 geoid" and "egm96_15.gtx" in g.description
 
 
-def _write_linear_tif(path: Path, a: float, b: float, c: float) -> None:
-    """A national-geoid-like GeoTIFF: N = a + b * lon + c * lat on 0.05 deg nodes."""
-    lon0, lat0, d = -80.0, 40.6, 0.05
-    rows, cols = 9, 11
-    lon = lon0 + d * np.arange(cols)
-    lat = lat0 - d * np.arange(rows)
-    n = (a + b * lon[None, :] + c * lat[:, None]).astype(np.float32)
-    profile = dict(driver="GTiff", width=cols, height=rows, count=1, dtype="float32")
-    tr = from_origin(lon0 - d / 2, lat0 + d / 2, d, d)
-    with rasterio.open(path, "w", crs="EPSG:4326", transform=tr, **profile) as ds:
-        ds.write(n, 1)
-
-
-def _write_gtx(path: Path, lat0: float, lon0: float, d: float, n: np.ndarray) -> None:
-    """A .gtx written by hand: big-endian header, float32 rows from south to north."""
-    rows, cols = n.shape
-    head = struct.pack(">4d2i", lat0, lon0, d, d, rows, cols)
-    path.write_bytes(head + n.astype(">f4").tobytes())
-
-
 def test_a_user_geotiff_grid_is_bilinear_and_exact_on_a_plane(tmp_path):
     grid = tmp_path / "national_geoid.tif"
-    _write_linear_tif(grid, -20.0, 0.3, -0.2)
+    write_linear_tif(grid, -20.0, 0.3, -0.2)
     g = GeoidModel.from_grid(grid, "GEOID-X")
     rng = np.random.default_rng(2)
     lat, lon = rng.uniform(40.21, 40.59, 500), rng.uniform(-79.99, -79.51, 500)
@@ -143,7 +94,7 @@ def test_a_hand_written_gtx_grid(tmp_path):
     rng = np.random.default_rng(3)
     n = rng.normal(-30.0, 2.0, (6, 8))
     grid = tmp_path / "local.gtx"
-    _write_gtx(grid, 40.0, 280.0, 0.1, n)  # lon0 in 0..360, as NOAA writes them
+    write_gtx(grid, 40.0, 280.0, 0.1, n)  # lon0 in 0..360, as NOAA writes them
     g = GeoidModel.from_grid(grid)
     assert g.name == "local"
     # A node's value belongs to the node: row 0 is the southern row in .gtx.
