@@ -2,10 +2,11 @@
 
 Renderings are made once per server (:meth:`ConsoleState.cached`). Site-frame
 coordinates are ENU metres; ``u_m`` is the local-frame up of a DEM point, ``h_m`` its
-height above the WGS84 ellipsoid, and ``elevation_m`` its orthometric height (above the
-EGM96 geoid, through its 15' grid evaluated at the point, when the PROJ grid
-``egm96_15.gtx`` is installed, e.g. by Debian's proj-data; else above the geoid the
-site states with its constant ``geoid_undulation_m``), named by ``elevation_datum``.
+height above the WGS84 ellipsoid, and ``elevation_m`` its orthometric height in the
+site's vertical datum (:func:`sea_level_geoid`: the geoid ``site.json`` states, evaluated
+at the point: EGM96 through PROJ's 15' grid ``egm96_15.gtx``, a national grid, or a
+constant ``N``; EGM96 for a site that states none, when the grid is installed), named by
+``elevation_datum``.
 """
 
 from __future__ import annotations
@@ -16,9 +17,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pyproj import Transformer
 
-from demtrack.core.errors import NotFoundError, QueryError
+from demtrack.core.errors import GeoidError, NotFoundError, QueryError
+from demtrack.core.geo.geoid import GeoidModel, default_grid_dirs, find_grid
 from demtrack.core.site.orthophoto import read_orthophoto
 from demtrack.core.site.road_io import roads_to_geojson
 from demtrack.core.terrain.grid import GridSpec
@@ -31,9 +32,11 @@ __all__ = [
     "elevation_at",
     "geoid_grid_path",
     "orthometric",
+    "orthometric_in",
     "orthophoto_png",
     "relief_png",
     "roads_geojson",
+    "sea_level_geoid",
     "site_out",
 ]
 
@@ -129,35 +132,50 @@ def roads_geojson(state: ConsoleState, frame: str) -> dict[str, Any]:
 @functools.lru_cache(maxsize=1)
 def geoid_grid_path() -> Path | None:
     """The EGM96 grid file (:data:`GEOID_GRID`) if PROJ's data folders or Debian's hold it."""
-    import pyproj.datadir
-
-    dirs = [pyproj.datadir.get_data_dir(), *os.environ.get("PROJ_DATA", "").split(os.pathsep)]
-    dirs += ["/usr/share/proj", "/usr/local/share/proj"]
-    for d in dirs:
-        for part in str(d).split(os.pathsep):
-            if part and (Path(part) / GEOID_GRID).is_file():
-                return Path(part) / GEOID_GRID
-    return None
+    env = [Path(p) for p in os.environ.get("PROJ_DATA", "").split(os.pathsep) if p]
+    return find_grid(GEOID_GRID, [*default_grid_dirs(), *env])
 
 
 @functools.lru_cache(maxsize=1)
-def _egm96() -> Transformer | None:
+def _egm96() -> GeoidModel | None:
     path = geoid_grid_path()
-    if path is None:
-        return None
-    # (lon, lat, h above WGS84) -> (lon, lat, H above EGM96): H = h - N(lat, lon)
-    # (vgridshift adds multiplier x grid value).
-    return Transformer.from_pipeline(
-        "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad"
-        f" +step +proj=vgridshift +grids={path} +multiplier=-1"
-        " +step +proj=unitconvert +xy_in=rad +xy_out=deg"
-    )
+    return None if path is None else GeoidModel.from_grid(path, "EGM96")
+
+
+def sea_level_geoid(site: Any) -> GeoidModel:
+    """The geoid of the heights people read as sea level (readout, KML, GPX) at ``site``.
+
+    The site's own vertical datum (``site.geoid``: EGM96, a national grid, a stated
+    constant); for a site that states none (ellipsoidal), EGM96 when its grid is
+    installed, since those readers expect sea level; else none, and every height says it
+    is ellipsoidal. An object without ``geoid`` (an old caller) is read by its constant
+    ``geoid_undulation_m``.
+    """
+    geoid = getattr(site, "geoid", None)
+    if geoid is None:
+        n = float(getattr(site, "geoid_undulation_m", 0.0) or 0.0)
+        geoid = GeoidModel.constant(n) if n else GeoidModel.ellipsoidal()
+    if geoid.orthometric:
+        return geoid
+    return _egm96() or geoid
+
+
+def orthometric_in(
+    geoid: GeoidModel, lat_deg: float, lon_deg: float, h_m: float
+) -> tuple[float, str, float]:
+    """A point's height above ``geoid``, the datum's name and the undulation ``N`` (m).
+
+    ``(h, "WGS84 ellipsoid (no geoid model)", 0)`` for an ellipsoidal model;
+    :class:`~demtrack.core.errors.GeoidError` for a point the grid does not cover.
+    """
+    n = float(geoid.undulation_m(lat_deg, lon_deg))
+    return h_m - n, geoid.datum, n
 
 
 def orthometric(
     lat_deg: float, lon_deg: float, h_m: float, stated_undulation_m: float
 ) -> tuple[float, str]:
-    """A point's height above the geoid and the name of that datum.
+    """A point's height above the geoid and the name of that datum (EGM96 first).
 
     Parameters
     ----------
@@ -166,27 +184,23 @@ def orthometric(
     h_m : float
         Height above the WGS84 ellipsoid (m).
     stated_undulation_m : float
-        The site's stated constant geoid undulation ``N`` (``h = H + N``), used when the
-        EGM96 grid is not installed.
+        A stated constant geoid undulation ``N`` (``h = H + N``), used when the EGM96
+        grid is not installed.
 
     Returns
     -------
     (float, str)
         ``H`` (m) and its datum: ``"EGM96 geoid"`` (grid evaluated at the point), else
         ``"geoid of the site (N = ... m, stated)"``, else, with nothing stated,
-        ``"WGS84 ellipsoid (no geoid model)"``.
+        ``"WGS84 ellipsoid (no geoid model)"``. (The readout itself follows the site's
+        vertical datum: :func:`sea_level_geoid`.)
     """
-    tr = _egm96()
-    if tr is not None:
-        _, _, big_h = tr.transform(lon_deg, lat_deg, h_m)
-        if np.isfinite(big_h):
-            return float(big_h), "EGM96 geoid"
-    if stated_undulation_m:
-        return (
-            h_m - stated_undulation_m,
-            f"geoid of the site (N = {stated_undulation_m:g} m, stated)",
-        )
-    return h_m, "WGS84 ellipsoid (no geoid model)"
+    geoid = _egm96()
+    if geoid is None:
+        n = float(stated_undulation_m)
+        geoid = GeoidModel.constant(n) if n else GeoidModel.ellipsoidal()
+    big_h, datum, _ = orthometric_in(geoid, lat_deg, lon_deg, h_m)
+    return big_h, datum
 
 
 def elevation_at(state: ConsoleState, e: float, n: float) -> dict[str, Any]:
@@ -194,18 +208,22 @@ def elevation_at(state: ConsoleState, e: float, n: float) -> dict[str, Any]:
 
     ``u_m``: the DEM surface's local-frame up (m), None off the DEM or in a hole; ``h_m``:
     height above the WGS84 ellipsoid of that ground point (of ``u = 0`` when None);
-    ``elevation_m``: its orthometric height (None where ``u_m`` is), in
-    ``elevation_datum`` (:func:`orthometric`). :class:`QueryError` for a point more than
-    10 000 km from the anchor.
+    ``elevation_m``: its orthometric height ``h - N`` (None where ``u_m`` is), in the
+    datum ``elevation_datum`` names (:func:`sea_level_geoid`: the site's own, e.g.
+    ``"EGM96 geoid"``); ``undulation_m``: that ``N`` at the point (0 when the datum is the
+    ellipsoid). :class:`QueryError` for a point more than 10 000 km from the anchor or
+    off the site's geoid grid.
     """
     if max(abs(e), abs(n)) > 1e7:
         raise QueryError(f"point ({e}, {n}) is too far from the site frame's anchor")
     z = float(state.site.dem.sample(np.array([e]), np.array([n]))[0])
     u = z if np.isfinite(z) else None
     lat, lon, h = state.site.frame.to_geodetic(e, n, 0.0 if u is None else u)
-    big_h, datum = orthometric(
-        float(lat), float(lon), float(h), float(state.site.geoid_undulation_m)
-    )
+    geoid = sea_level_geoid(state.site)
+    try:
+        big_h, datum, n_m = orthometric_in(geoid, float(lat), float(lon), float(h))
+    except GeoidError as exc:
+        raise QueryError(f"point ({e}, {n}): {exc}") from None
     return {
         "e_m": e,
         "n_m": n,
@@ -215,4 +233,5 @@ def elevation_at(state: ConsoleState, e: float, n: float) -> dict[str, Any]:
         "h_m": float(h),
         "elevation_m": None if u is None else big_h,
         "elevation_datum": datum,
+        "undulation_m": n_m,
     }

@@ -6,11 +6,11 @@ uses the same); this module turns the server's stored (possibly clipped) bodies 
 picks the writer. The console's export menu downloads from here.
 
 Heights: GeoJSON z, GeoPackage z and ``h_wgs84_m`` are ellipsoidal; KML ``absolute``, GPX
-``<ele>`` and ``elevation_m`` are orthometric, by the same rule as the console's readout
-(:func:`~demtrack.server.site_info.orthometric`): EGM96 evaluated per point when PROJ's
-``egm96_15.gtx`` is installed, else the site's stated constant undulation ``N``
-(``geoid_undulation_m``), else none: then those heights are the ellipsoidal ones, and
-every file says so.
+``<ele>`` and ``elevation_m`` are orthometric in the site's vertical datum, by the same
+rule as the console's readout (:func:`~demtrack.server.site_info.sea_level_geoid`: the
+geoid ``site.json`` states, evaluated at each point, e.g. EGM96; EGM96 for a site that
+states none, when its grid is installed), else none: then those heights are the
+ellipsoidal ones, and every file says so.
 
 Times: the store keeps session seconds ``t_s`` with no wall clock, so each file's times are
 ``epoch + t_s`` with the epoch declared in the file: the ``epoch`` parameter, else the UNIX
@@ -34,7 +34,7 @@ from demtrack.core.io.track_io import (
 )
 from demtrack.core.tracking.types import Track, TrackPoint
 
-from .site_info import geoid_grid_path
+from .site_info import sea_level_geoid
 
 __all__ = [
     "EXPORT_TYPES",
@@ -84,14 +84,19 @@ def time_base(epoch: datetime | None, *, wall_clock: bool = False) -> TimeBase:
 
 
 def site_heights(site: Any, *, egm96: bool = True) -> HeightModel:
-    """The geoid model for sea-level heights: EGM96, else the site's stated ``N``, else none.
+    """The exports' sea-level heights at ``site``, by the readout's rule.
 
-    ``egm96=False`` skips the grid (the site's stated ``N`` only).
+    The site's vertical datum (:func:`~demtrack.server.site_info.sea_level_geoid`: its
+    geoid evaluated at each point; EGM96 for a site that states none, when installed),
+    else none (ellipsoidal, declared). ``egm96=False`` never adds EGM96 to a site that
+    states no geoid (only its stated model, or its constant ``geoid_undulation_m``).
     """
-    grid = geoid_grid_path() if egm96 else None
-    if grid is None:
-        return HeightModel.for_site(getattr(site, "geoid_undulation_m", 0.0))
-    return HeightModel.geoid_grid(grid, f"EGM96 ({grid.name}, evaluated at each point)")
+    if egm96:
+        return HeightModel.from_geoid(sea_level_geoid(site))
+    geoid = getattr(site, "geoid", None)
+    if geoid is not None:
+        return HeightModel.from_geoid(geoid)
+    return HeightModel.for_site(getattr(site, "geoid_undulation_m", 0.0))
 
 
 def export_bytes(

@@ -6,10 +6,12 @@ A track is prepared once (:func:`prepare_tracks`) into an :class:`ExportTrack`: 
 point's ISO 8601 UTC time, and the point indices of its runs between gaps (each run is
 written as its own segment, never a straight line across the gap).
 
-Heights follow a :class:`HeightModel`: with a geoid model the absolute height is the
-orthometric ``H = h - N(lat, lon)``; without one it is the ellipsoidal ``h``, and every
-file says so (:attr:`HeightModel.note`). The model takes a vectorised function, so a
-per-point geoid grid (EGM96) can be fed in without touching the writers.
+Heights follow a :class:`HeightModel`, normally built from the site's
+:class:`~demtrack.core.geo.geoid.GeoidModel` (:meth:`HeightModel.from_geoid`): with a
+geoid the absolute height is the orthometric ``H = h - N(lat, lon)``, ``N`` evaluated at
+each point (EGM96 from its 15' grid, a national grid, or a stated constant); without one
+it is the ellipsoidal ``h``, and every file says so (:attr:`HeightModel.note`,
+:attr:`HeightModel.datum_name`).
 
 Times follow a :class:`TimeBase`: a point's time is ``epoch + t_s``. When the store's
 ``t_s`` are UNIX seconds the epoch is 1970-01-01T00:00:00Z and the times are wall-clock
@@ -21,13 +23,14 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import TrackingError
+from ..errors import GeoidError, TrackingError
+from ..geo.geoid import GeoidModel
 from ..tracking.types import Track
 
 __all__ = [
@@ -88,23 +91,39 @@ class HeightModel:
         the site has none, and the absolute heights are then the ellipsoidal ones.
     to_orthometric : callable or None
         ``(lat_deg, lon_deg, h_m) -> H_m`` on arrays of shape (n,); required with ``geoid``.
+    datum : str or None
+        The name of the orthometric heights' datum for column values (``"EGM96 geoid"``);
+        default ``"geoid: <geoid>"``.
     """
 
     geoid: str | None = None
     to_orthometric: OrthometricFn | None = None
+    datum: str | None = None
 
     def __post_init__(self) -> None:
         if (self.geoid is None) != (self.to_orthometric is None):
             raise TrackingError("a HeightModel needs both a geoid name and its function")
 
     @classmethod
+    def from_geoid(cls, geoid: GeoidModel) -> HeightModel:
+        """The exports' heights through a site's :class:`~demtrack.core.geo.geoid.GeoidModel`.
+
+        An ellipsoidal model gives no geoid (absolute heights are ellipsoidal, declared);
+        a constant or grid model gives ``H = h - N(lat, lon)``, evaluated at each point.
+        """
+        if not geoid.orthometric:
+            return cls()
+        return cls(geoid.description, geoid.to_orthometric, geoid.datum)
+
+    @classmethod
     def constant_undulation(cls, n_m: float, name: str | None = None) -> HeightModel:
         """``H = h - N`` with one undulation ``N`` (m) for the whole site."""
-        n = float(n_m)
-        if not np.isfinite(n):
-            raise TrackingError(f"geoid undulation must be finite, got {n_m!r}")
-        label = name or f"the site's constant geoid undulation N = {n:g} m"
-        return cls(label, lambda lat, lon, h: np.asarray(h, dtype=float) - n)
+        try:
+            geoid = GeoidModel.constant(n_m)
+        except GeoidError as exc:
+            raise TrackingError(str(exc)) from None
+        model = cls.from_geoid(geoid)
+        return model if name is None else replace(model, geoid=name)
 
     @classmethod
     def geoid_grid(cls, path: str | os.PathLike[str], name: str | None = None) -> HeightModel:
@@ -112,34 +131,23 @@ class HeightModel:
 
         The grid is evaluated at each point (bilinear, by PROJ's ``vgridshift``).
         """
-        from pyproj import Transformer
-
-        grid = Path(path)
-        if not grid.is_file():
-            raise TrackingError(f"geoid grid {grid} does not exist")
-        # vgridshift gives z + multiplier * N: -1 for H = h - N.
-        pipeline = (
-            "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad"
-            f" +step +proj=vgridshift +grids={grid} +multiplier=-1"
-            " +step +proj=unitconvert +xy_in=rad +xy_out=deg"
-        )
-        # One transformer per model: pyproj transformers are not shared between threads,
-        # and a model serves one export.
-        tr = Transformer.from_pipeline(pipeline)
-
-        def to_orthometric(lat: np.ndarray, lon: np.ndarray, h: np.ndarray) -> np.ndarray:
-            _, _, big_h = tr.transform(np.asarray(lon), np.asarray(lat), np.asarray(h))
-            return np.asarray(big_h, dtype=float)
-
-        return cls(name or f"{grid.stem} ({grid.name}, evaluated at each point)", to_orthometric)
+        try:
+            geoid = GeoidModel.from_grid(Path(path))
+        except GeoidError as exc:
+            raise TrackingError(str(exc)) from None
+        model = cls.from_geoid(geoid)
+        return model if name is None else replace(model, geoid=name)
 
     @classmethod
-    def for_site(cls, geoid_undulation_m: float | None) -> HeightModel:
-        """A site's model: its stated constant ``N``, or none when it states ``N = 0``.
+    def for_site(cls, geoid: GeoidModel | float | None) -> HeightModel:
+        """A site's model: from its :class:`GeoidModel`, or from a constant ``N`` (m).
 
-        (``site.json`` defaults ``geoid_undulation_m`` to 0, so 0 reads as "not known".)
+        A number is the old ``site.json`` ``geoid_undulation_m``: 0 (its default) reads as
+        "not known", so no geoid.
         """
-        n = float(geoid_undulation_m or 0.0)
+        if isinstance(geoid, GeoidModel):
+            return cls.from_geoid(geoid)
+        n = float(geoid or 0.0)
         return cls.constant_undulation(n) if n != 0.0 else cls()
 
     @property
@@ -156,6 +164,13 @@ class HeightModel:
         if out.shape != h.shape or not np.all(np.isfinite(out)):
             raise TrackingError("the geoid model gave no finite height for every point")
         return out
+
+    @property
+    def datum_name(self) -> str:
+        """The datum of :meth:`absolute` heights: ``"EGM96 geoid"``, ``"WGS84 ellipsoid"``."""
+        if self.to_orthometric is None:
+            return "WGS84 ellipsoid (no geoid model)"
+        return self.datum or f"geoid: {self.geoid}"
 
     @property
     def note(self) -> str:

@@ -106,7 +106,11 @@ def kml_text(
             "gaps": json.dumps([[a, b] for a, b in track.gaps]),
             "epoch_utc": times.epoch_iso,
             "wall_clock": "yes" if times.wall_clock else "no",
-            "altitude": "orthometric" if heights.orthometric else "ellipsoidal (no geoid model)",
+            "altitude": (
+                f"orthometric, above the {heights.datum_name}"
+                if heights.orthometric
+                else "ellipsoidal (no geoid model)"
+            ),
         }
         for key, value in fields.items():
             _sub(_sub(data, f"{_K}Data", name=key), f"{_K}value", value)

@@ -14,8 +14,9 @@ every file). A run of points between two gaps is its own segment in every format
 - GeoJSON (RFC 7946, here): a FeatureCollection, one Feature per track, a
   ``MultiLineString`` (one line per run; a one-point run is its point twice) with
   ``[lon, lat, h]`` positions, h ellipsoidal as the RFC says; properties ``track_id``,
-  ``class``, ``sensors``, ``gaps``, per-vertex ``times_s``, ``times_utc``, ``enu`` and,
-  with a geoid model, ``elevation_m``; optionally a Point Feature per track point.
+  ``class``, ``sensors``, ``gaps``, per-vertex ``times_s``, ``times_utc``, ``enu``,
+  ``h_wgs84_m`` (= z) and, with a geoid model, ``elevation_m`` (orthometric) with its
+  ``elevation_datum`` (``"EGM96 geoid"``); optionally a Point Feature per track point.
 - CSV (here, :mod:`csv`): one row per point, columns :data:`TRACK_CSV_COLUMNS` with
   ``longitude``/``latitude`` that QGIS detects and GDAL reads with
   ``-oo X_POSSIBLE_NAMES=longitude -oo Y_POSSIBLE_NAMES=latitude``; :data:`TRACK_CSVT` is
@@ -92,6 +93,7 @@ TRACK_CSV_COLUMNS = (
     "latitude",
     "h_wgs84_m",
     "elevation_m",
+    "elevation_datum",
     "e_m",
     "n_m",
     "u_m",
@@ -103,7 +105,7 @@ TRACK_CSV_COLUMNS = (
 )
 #: GDAL's ``.csvt`` for :data:`TRACK_CSV_COLUMNS` (one type per column, in order).
 TRACK_CSVT = (
-    '"Integer","String","Integer","DateTime","Real","Real","Real","Real","Real",'
+    '"Integer","String","Integer","DateTime","Real","Real","Real","Real","Real","String",'
     '"Real","Real","Real","String","String","Real","Real","Real"\n'
 )
 _ELLIPSOID_NOTE = "h / h_wgs84_m / GeoJSON z are metres above the WGS84 ellipsoid"
@@ -187,9 +189,11 @@ def tracks_to_geojson(
             "enu": [[float(v) for v in p.p_enu] for p in track.points],
             "height": f"{_ELLIPSOID_NOTE}; {hm.note}",
             "time": tb.note,
+            "h_wgs84_m": [float(v) for v in xt.h_m],
         }
         if hm.orthometric:
             props["elevation_m"] = [float(v) for v in xt.abs_h_m]
+            props["elevation_datum"] = hm.datum_name
         geometry = {"type": "MultiLineString", "coordinates": _multiline(xt)}
         features.append({"type": "Feature", "geometry": geometry, "properties": props})
         if not include_points:
@@ -204,9 +208,11 @@ def tracks_to_geojson(
                 "sensors": list(p.sensors),
                 "fix_indices": list(p.fix_indices),
                 "enu": [float(v) for v in p.p_enu],
+                "h_wgs84_m": float(xt.h_m[k]),
             }
             if hm.orthometric:
                 pp["elevation_m"] = float(xt.abs_h_m[k])
+                pp["elevation_datum"] = hm.datum_name
             coords = [float(xt.lon_deg[k]), float(xt.lat_deg[k]), float(xt.h_m[k])]
             features.append(
                 {
@@ -253,8 +259,10 @@ def write_tracks_csv(
 ) -> None:
     """Write one CSV row per track point (columns :data:`TRACK_CSV_COLUMNS`).
 
-    Without ``to_geodetic`` the geodetic columns are empty; ``elevation_m`` is empty
-    without a geoid model; ``segment`` numbers the runs between gaps from 0.
+    Without ``to_geodetic`` the geodetic columns are empty. ``h_wgs84_m`` is above the
+    WGS84 ellipsoid; ``elevation_m`` above the geoid that ``elevation_datum`` names
+    (``"EGM96 geoid"``), both empty without a geoid model; ``segment`` numbers the runs
+    between gaps from 0.
     """
     hm, tb = _bases(epoch, times, heights)
     tracks = list(tracks)
@@ -270,13 +278,14 @@ def write_tracks_csv(
             for i, p in enumerate(track.points):
                 e, n_m, u = (float(v) for v in p.p_enu)
                 if xt is None:
-                    geo = ["", "", "", ""]
+                    geo = ["", "", "", "", ""]
                 else:
                     geo = [
                         repr(float(xt.lon_deg[i])),
                         repr(float(xt.lat_deg[i])),
                         repr(float(xt.h_m[i])),
                         repr(float(xt.abs_h_m[i])) if hm.orthometric else "",
+                        hm.datum_name if hm.orthometric else "",
                     ]
                 cov = (
                     ["", "", ""]

@@ -20,7 +20,7 @@ from typing import Any, Literal
 import numpy as np
 from affine import Affine
 
-from ..errors import CrsError, DemError, InputFileError
+from ..errors import CrsError, DemError, GeoidError, InputFileError
 from ..geo.geodesy import (
     WGS84_A_M,
     WGS84_F,
@@ -30,6 +30,7 @@ from ..geo.geodesy import (
     horizontal_crs,
     z_unit_m_of,
 )
+from ..geo.geoid import GeoidModel, as_geoid
 from .grid import GridSpec
 
 __all__ = [
@@ -126,7 +127,7 @@ def warp_to_local(
     *,
     kind: Literal["elevation", "image"] = "elevation",
     src_nodata: float | None = None,
-    geoid_undulation_m: float = 0.0,
+    geoid_undulation_m: float | GeoidModel = 0.0,
     z_unit_m: float | None = None,
     z_local: Any = 0.0,
     max_iter: int = 6,
@@ -151,9 +152,11 @@ def warp_to_local(
     kind : {"elevation", "image"}
     src_nodata : float, optional
         Source value meaning "no data" (per band for images).
-    geoid_undulation_m : float
-        ``N`` (m): source heights ``H`` are orthometric and ``h = H * z_unit_m + N``.
-        0 means the source heights are ellipsoidal (WGS84).
+    geoid_undulation_m : float or GeoidModel
+        The geoid of orthometric source heights: ``h = H * z_unit_m + N(lat, lon)``, ``N``
+        evaluated at each cell's position (a :class:`~demtrack.core.geo.geoid.GeoidModel`,
+        e.g. EGM96), or one constant ``N`` (m). 0 (or an ellipsoidal model) means the
+        source heights are ellipsoidal (WGS84).
     z_unit_m : float, optional
         Metres per source height unit; default from the CRS (see
         :func:`~demtrack.core.geo.geodesy.z_unit_m_of`: ftUS for a ftUS state plane).
@@ -209,9 +212,10 @@ def warp_to_local(
     k = z_unit_m_of(src_crs) if z_unit_m is None else float(z_unit_m)
     if not (np.isfinite(k) and k > 0):
         raise DemError(f"z_unit_m must be positive; got {z_unit_m}")
-    n_geoid = float(geoid_undulation_m)
-    if not np.isfinite(n_geoid):
-        raise DemError("geoid_undulation_m must be finite")
+    try:
+        n_geoid = as_geoid(geoid_undulation_m)
+    except GeoidError as exc:
+        raise DemError(f"geoid_undulation_m: {exc}") from None
 
     e_all, n_all = grid.centres()
     rows_per_chunk = max(1, _CHUNK_CELLS // grid.ncols)
@@ -266,7 +270,7 @@ def _solve_heights(
     e: np.ndarray,
     n: np.ndarray,
     k: float,
-    n_geoid: float,
+    n_geoid: GeoidModel,
     max_iter: int,
     tol_m: float,
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -277,7 +281,7 @@ def _solve_heights(
     for _ in range(max(1, int(max_iter))):
         lat, lon, h = frame.to_geodetic(e, n, u)
         x, y = project(lon, lat)
-        h_src = bilinear_at_centres(src, transform, x, y) * k + n_geoid
+        h_src = bilinear_at_centres(src, transform, x, y) * k + n_geoid.undulation_m(lat, lon)
         ok = np.isfinite(h_src)
         phi, lam = np.radians(lat), np.radians(lon)
         # cos of the angle between the frame's up and the ellipsoid normal at the point:
@@ -301,19 +305,29 @@ def points_to_local(
     crs: Any,
     frame: LocalFrame,
     *,
-    geoid_undulation_m: float = 0.0,
+    geoid_undulation_m: float | GeoidModel = 0.0,
     z_unit_m: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Point cloud (e.g. lidar in UTM) to local ``(e, n, u)`` arrays (m).
 
     Exact per point; see :meth:`~demtrack.core.geo.geodesy.LocalFrame.to_enu_from_crs` for
-    the height rules (``h = z * z_unit_m + N``).
+    the height rules (``h = z * z_unit_m + N``). ``geoid_undulation_m`` is a constant
+    ``N`` (m) or a :class:`~demtrack.core.geo.geoid.GeoidModel` evaluated at each point.
     """
     if crs is None:
         raise CrsError("point cloud has no CRS; cannot place it in the site frame")
-    e, n, u = frame.to_enu_from_crs(
-        x, y, z, crs, geoid_undulation_m=geoid_undulation_m, z_unit_m=z_unit_m
-    )
+    if isinstance(geoid_undulation_m, GeoidModel) and geoid_undulation_m.kind == "grid":
+        # N per point: at the points' own lon/lat (it depends on the horizontal only).
+        hcrs = horizontal_crs(crs)
+        lon, lat = cached_transformer(hcrs.to_wkt(), "EPSG:4326").transform(
+            np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+        )
+        k = z_unit_m_of(crs) if z_unit_m is None else float(z_unit_m)
+        h = np.asarray(z, dtype=np.float64) * k + geoid_undulation_m.undulation_m(lat, lon)
+        e, n, u = frame.to_enu_from_crs(x, y, h, crs, z_unit_m=1.0)
+    else:
+        n_const = as_geoid(geoid_undulation_m).n_m
+        e, n, u = frame.to_enu_from_crs(x, y, z, crs, geoid_undulation_m=n_const, z_unit_m=z_unit_m)
     return np.asarray(e), np.asarray(n), np.asarray(u)
 
 
@@ -352,7 +366,7 @@ def read_raster_to_local(
     *,
     kind: Literal["elevation", "image"] = "elevation",
     bands: tuple[int, ...] | None = None,
-    geoid_undulation_m: float = 0.0,
+    geoid_undulation_m: float | GeoidModel = 0.0,
     z_unit_m: float | None = None,
     z_local: Any = 0.0,
 ) -> np.ndarray:

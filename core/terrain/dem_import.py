@@ -14,8 +14,9 @@ first wins. Tiles of different lattices or CRSs are warped separately, and again
 listed wins cell by cell. Cells still empty are filled, when a coarse DEM is given, by
 bilinear interpolation of it (the VSAM report's 30 m fallback), and are marked as filled.
 
-Heights: the tiles' heights ``H`` become ellipsoidal as ``h = H * z_unit_m + N`` with the
-site's geoid undulation ``N`` (0 for ellipsoidal sources), then local-frame Z.
+Heights: the tiles' heights ``H`` become ellipsoidal as ``h = H * z_unit_m + N(lat, lon)``
+with the site's geoid (evaluated at each cell; a constant ``N``, or 0 for ellipsoidal
+sources), then local-frame Z.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from affine import Affine
 
 from ..errors import CrsError, DemError, InputFileError
 from ..geo.geodesy import LocalFrame, as_crs, cached_transformer, horizontal_crs, z_unit_m_of
+from ..geo.geoid import GeoidModel, as_geoid
 from .crs_import import source_window, unit_m_from_tag, warp_to_local
 from .dem import Dem
 from .grid import GridSpec
@@ -219,7 +221,7 @@ def _sample_height_at(info: RasterInfo, lon: float, lat: float) -> float:
 def suggest_frame(
     infos: Sequence[RasterInfo],
     *,
-    geoid_undulation_m: float = 0.0,
+    geoid_undulation_m: float | GeoidModel = 0.0,
     z_unit_m: float | None = None,
 ) -> LocalFrame:
     """An anchor for a new site: the middle of the tiles' footprint, on the terrain.
@@ -236,7 +238,8 @@ def suggest_frame(
     for info in infos:
         v = _sample_height_at(info, lon0, lat0)
         if np.isfinite(v):
-            h0 = v * info.z_unit_m(z_unit_m) + geoid_undulation_m
+            n0 = float(as_geoid(geoid_undulation_m).undulation_m(lat0, lon0))
+            h0 = v * info.z_unit_m(z_unit_m) + n0
             break
     return LocalFrame(round(float(lat0), 7), round(float(lon0), 7), round(float(h0), 3))
 
@@ -349,7 +352,7 @@ def import_dem(
     grid: GridSpec,
     *,
     coarse: str | Path | None = None,
-    geoid_undulation_m: float = 0.0,
+    geoid_undulation_m: float | GeoidModel = 0.0,
     z_unit_m: float | None = None,
     sigma_m: float = 0.0,
     coarse_sigma_m: float = 1.0,
@@ -367,8 +370,10 @@ def import_dem(
         Target grid (m, site frame).
     coarse : path, optional
         A coarse DEM in any CRS, same vertical datum as the tiles, for the holes.
-    geoid_undulation_m : float
-        ``N`` (m) when the tiles' heights are orthometric; 0 when they are ellipsoidal.
+    geoid_undulation_m : float or GeoidModel
+        The tiles' geoid when their heights are orthometric: a
+        :class:`~demtrack.core.geo.geoid.GeoidModel` (``N`` evaluated at each cell's
+        lat/lon, e.g. EGM96) or a constant ``N`` (m); 0 when they are ellipsoidal.
     z_unit_m : float, optional
         Metres per height unit for every input; default per file (band unit tag, else
         the CRS's vertical or horizontal unit, so a ftUS state plane means ftUS heights).

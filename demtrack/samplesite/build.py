@@ -4,6 +4,11 @@ The steps follow Collins et al. (1998): grid a helicopter laser scan at 0.5 m wi
 per-cell mean, variance and count; fill the holes from a 30 m coarse DEM; calibrate each
 pan-tilt head's yaw from landmark pan readings; then render each camera's view of the
 site by ray casting the DEM and draping the orthophoto. Deterministic for a given seed.
+
+The site is anchored at the real Bushy Run with its real vertical datum: ``site.json``
+states EGM96 (PROJ's ``egm96_15.gtx``, Debian's proj-data; N = -33.97 m at the anchor),
+so the console's elevation and the KML/GPX exports are sea-level heights, 34 m above the
+ellipsoidal ones. Building needs the grid: without it the build stops with one line.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from PIL import Image
 from demtrack.core.camera.pantilt import wrap_deg
 from demtrack.core.errors import SiteError
 from demtrack.core.geo.geodesy import LocalFrame
+from demtrack.core.geo.geoid import GeoidModel
 from demtrack.core.geolocation.roads import RoadNetwork
 from demtrack.core.raycast.cast import RayCaster
 from demtrack.core.raycast.light import light_kernels
@@ -81,6 +87,10 @@ def _build(
     out: Path, seed: int, log: Callable[[str], None] | None, warmers: KernelWarmers | None
 ) -> None:
     """The build's steps (see :func:`build_sample_site`)."""
+    # The real Bushy Run's vertical datum: heights people read (the console's elevation,
+    # KML, GPX) are above EGM96, about 34 m above the ellipsoidal heights there. Looked up
+    # first, so a missing grid stops the build before anything is written.
+    geoid = GeoidModel.egm96()
     (out / "images").mkdir(parents=True, exist_ok=True)
     say = log or (lambda _msg: None)
     t0 = time.perf_counter()
@@ -147,7 +157,13 @@ def _build(
                 f"{spec.id} ({spec.name}): yaw {cal.yaw_deg:.3f} deg (true"
                 f" {spec.true_mount_yaw_deg}), rms {cal.rms_deg:.3f} deg, image rendered"
             )
-    doc = site_manifest(SITE_NAME, frame, sensors, out, extra={"generator": {"seed": seed}})
+    doc = site_manifest(
+        SITE_NAME, frame, sensors, out, geoid=geoid, extra={"generator": {"seed": seed}}
+    )
+    step(
+        f"vertical datum EGM96: N = {doc['geoid_undulation_m']:.2f} m at the anchor, so"
+        f" sea-level heights are {-doc['geoid_undulation_m']:.2f} m above ellipsoidal ones"
+    )
     (out / MANIFEST).write_text(json.dumps(doc, indent=2), "utf-8")
     (out / "truth.json").write_text(json.dumps({"sensors": truth}, indent=2), "utf-8")
     step(f"site written to {out}")

@@ -28,7 +28,8 @@ __all__ = [
 ]
 
 #: WGS84 anchor of the site frame: Bushy Run Battlefield, PA (lat, lon, ellipsoidal h).
-#: The ground there is about 365 m above the geoid; the EGM96 undulation is about -34 m.
+#: The ground there is about 365 m above the geoid; the EGM96 undulation is -33.97 m
+#: (site.json states EGM96, so sea-level heights are h + 33.97 m near the anchor).
 ANCHOR = (40.3556, -79.6225, 331.0)
 #: Half-width of the square site (m): the site spans [-EXTENT_M, EXTENT_M] in x and y.
 EXTENT_M = 150.0
