@@ -15,10 +15,11 @@ from typing import TYPE_CHECKING
 
 from demtrack.core.errors import CameraError, SiteError
 
-from .common import non_negative, positive, positive_int
+from .common import finite, non_negative, positive, positive_int
 
 if TYPE_CHECKING:
     from demtrack.core.camera.pinhole import Intrinsics
+    from demtrack.core.geo.geoid import GeoidModel
 
 __all__ = ["register"]
 
@@ -26,18 +27,67 @@ _Z_UNITS = {"m": 1.0, "ft": 0.3048, "ftUS": 1200.0 / 3937.0}
 _MAX_ORTHO_SIDE = 8192
 
 
-def _geoid(args: argparse.Namespace, doc: dict | None) -> float:
-    """The site's N: the manifest's, or --geoid-undulation for a new site."""
-    given = args.geoid_undulation
-    if doc is None:
-        return 0.0 if given is None else float(given)
-    site_n = float(doc.get("geoid_undulation_m", 0.0))
-    if given is not None and float(given) != site_n:
-        raise SiteError(
-            f"site.json states geoid_undulation_m = {site_n} m; --geoid-undulation {given} "
-            "would disagree with what is already in the site (edit site.json to change it)"
-        )
-    return site_n
+def _geoid(
+    args: argparse.Namespace, doc: dict | None, root: Path
+) -> tuple[GeoidModel, Path | None]:
+    """The site's geoid model, and a user's grid file to copy into a new site.
+
+    An existing site keeps its own (``--geoid`` / ``--geoid-undulation`` may only repeat
+    it); a new site takes ``--geoid egm96|FILE|none`` or ``--geoid-undulation N``
+    (neither: none, ellipsoidal). A missing grid is an error naming it.
+    """
+    from demtrack.core.geo.geoid import GeoidModel
+    from demtrack.core.site.folder import load_site
+
+    given, n_given = args.geoid, args.geoid_undulation
+    if given is not None and n_given is not None:
+        raise SiteError("give either --geoid or --geoid-undulation, not both")
+    if doc is not None:
+        site_geoid = load_site(root).geoid
+        if n_given is not None and GeoidModel.constant(n_given) != site_geoid:
+            raise SiteError(
+                f"site.json states its geoid as {site_geoid.datum}; --geoid-undulation "
+                f"{n_given} would disagree with what is already in the site (edit site.json "
+                "to change it)"
+            )
+        if given is not None and _geoid_choice(given, root)[0] != site_geoid:
+            raise SiteError(
+                f"site.json states its geoid as {site_geoid.datum}; --geoid {given} would "
+                "disagree with what is already in the site (edit site.json to change it)"
+            )
+        return site_geoid, None
+    if n_given is not None:
+        return GeoidModel.constant(n_given), None
+    if given is None:
+        return GeoidModel.ellipsoidal(), None
+    return _geoid_choice(given, root)
+
+
+def _geoid_choice(given: str, root: Path) -> tuple[GeoidModel, Path | None]:
+    from demtrack.core.geo.geoid import GeoidModel
+
+    if given.lower() == "none":
+        return GeoidModel.ellipsoidal(), None
+    if given.lower() == "egm96":
+        return GeoidModel.egm96(), None
+    path = Path(given)
+    if not path.is_file():
+        raise SiteError(f"--geoid: geoid grid not found: {path} (use egm96, none or a grid file)")
+    inside = root / "geoid" / path.name
+    if inside.is_file() and inside.resolve() == path.resolve():
+        return GeoidModel.from_grid(inside), None
+    return GeoidModel.from_grid(path), path
+
+
+def _n_at(site_geoid: GeoidModel, x: float, y: float, crs: object) -> float:
+    """The site's geoid undulation (m) at a position in ``crs`` (per point for a grid)."""
+    if site_geoid.kind != "grid":
+        return site_geoid.n_m
+    from demtrack.core.geo.geodesy import cached_transformer, horizontal_crs
+
+    hcrs = horizontal_crs(crs)
+    lon, lat = cached_transformer(hcrs.to_wkt(), "EPSG:4326").transform(x, y)
+    return float(site_geoid.undulation_m(lat, lon))
 
 
 # --------------------------------------------------------------------------- import-dem
@@ -45,10 +95,12 @@ def _geoid(args: argparse.Namespace, doc: dict | None) -> float:
 
 def _run_import_dem(args: argparse.Namespace) -> int:
     from demtrack.core.geo.geodesy import LocalFrame
-    from demtrack.core.site.folder import MANIFEST, load_site
+    from demtrack.core.geo.geoid import GeoidModel
+    from demtrack.core.site.folder import MANIFEST, load_site, vertical_datum_doc
     from demtrack.core.site.update import (
         new_manifest,
         read_manifest,
+        write_atomic,
         write_dem_atomic,
         write_manifest,
     )
@@ -67,8 +119,13 @@ def _run_import_dem(args: argparse.Namespace) -> int:
     exists = (root / MANIFEST).is_file()
     doc = read_manifest(root) if exists else None
     infos = [read_raster_info(p) for p in args.tiles]
-    n_geoid = _geoid(args, doc)
-    n_used = n_geoid if args.vertical_datum == "orthometric" else 0.0
+    geoid, grid_file = _geoid(args, doc, root)
+    if args.vertical_datum == "orthometric" and not geoid.orthometric:
+        raise SiteError(
+            "--vertical-datum orthometric needs the tiles' geoid: --geoid egm96|FILE or "
+            "--geoid-undulation N (a new site), or a site.json that states one"
+        )
+    n_used = geoid if args.vertical_datum == "orthometric" else 0.0
     z_unit = _Z_UNITS[args.z_unit] if args.z_unit else None
     if doc is not None:
         if args.anchor is not None:
@@ -103,7 +160,15 @@ def _run_import_dem(args: argparse.Namespace) -> int:
     try:
         write_dem_atomic(root / "dem.tif", result.dem)
         if doc is None:
-            doc = new_manifest(args.name or root.name, frame, n_geoid)
+            doc = new_manifest(args.name or root.name, frame, 0.0)
+            if grid_file is not None:
+                (root / "geoid").mkdir(exist_ok=True)
+                copy = root / "geoid" / grid_file.name
+                write_atomic(copy, lambda p: shutil.copyfile(grid_file, p))
+                geoid = GeoidModel.from_grid(copy, geoid.name)
+            doc["vertical_datum"] = vertical_datum_doc(geoid, root)
+            n0 = geoid.undulation_m(frame.lat_deg, frame.lon_deg)
+            doc["geoid_undulation_m"] = round(float(n0), 3)
         doc["dem"] = "dem.tif"
         write_manifest(root, doc)
     except BaseException:
@@ -123,11 +188,13 @@ def _run_import_dem(args: argparse.Namespace) -> int:
         f"(WGS84 ellipsoidal){'' if exists else ', new site'}"
     )
     datum = (
-        f"orthometric, h = H + N with N = {n_used:.3f} m"
+        f"orthometric, h = H + N with N from {geoid.description}"
         if args.vertical_datum == "orthometric"
         else "ellipsoidal (WGS84)"
     )
     print(f"  source heights: {datum}")
+    n_anchor = float(geoid.undulation_m(frame.lat_deg, frame.lon_deg))
+    print(f"  site vertical datum: {geoid.datum} (N = {n_anchor:.3f} m at the anchor)")
     for info, cells in zip(infos, result.tile_cells, strict=True):
         unit = info.z_unit_m(z_unit)
         print(f"  {info.path}: {info.crs_name}, height unit {unit:.10g} m, {cells:,} cells")
@@ -259,8 +326,12 @@ def _run_add_camera(args: argparse.Namespace) -> int:
         raise SiteError(f"sensor {args.id!r} already exists; pass --replace to overwrite it")
     intr = _intrinsics(args)
     crs = as_crs(args.crs)
-    n_geoid = site.geoid_undulation_m if args.vertical_datum == "orthometric" else 0.0
     x, y, z = args.position
+    if args.vertical_datum == "orthometric" and not site.geoid.orthometric:
+        raise SiteError(
+            "--vertical-datum orthometric: this site states no geoid (site.json vertical_datum)"
+        )
+    n_geoid = _n_at(site.geoid, x, y, crs) if args.vertical_datum == "orthometric" else 0.0
     pose = pose_from_survey(
         site.frame,
         intr,
@@ -325,7 +396,7 @@ def _datum(p: argparse.ArgumentParser, what: str) -> None:
         required=True,
         choices=("ellipsoidal", "orthometric"),
         help=f"what the {what} heights are measured from: the WGS84 ellipsoid, or the "
-        "geoid (h = H + N with the site's geoid undulation N)",
+        "site's geoid (h = H + N(lat, lon), N from its vertical datum)",
     )
 
 
@@ -336,7 +407,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("tiles", type=Path, nargs="+", metavar="TILE.tif", help="first listed wins")
     _datum(p, "tiles'")
     p.add_argument("--coarse", type=Path, metavar="FILE", help="coarse DEM filling the holes")
-    p.add_argument("--geoid-undulation", type=float, metavar="N", help="N (m), new sites")
+    p.add_argument(
+        "--geoid", metavar="egm96|FILE|none",
+        help="new site's vertical datum: EGM96 (PROJ's egm96_15.gtx, Debian's proj-data), a "
+        "PROJ-readable geoid grid (.gtx/.tif, copied into the site), or none (ellipsoidal)",
+    )  # fmt: skip
+    p.add_argument(
+        "--geoid-undulation", type=finite, metavar="N", help="new site: one constant N (m)"
+    )
     p.add_argument("--z-unit", choices=tuple(_Z_UNITS), help="height unit (default: per file)")
     p.add_argument("--cell", type=positive, metavar="M", help="cell size (default: native)")
     p.add_argument("--bounds", type=float, nargs=4, metavar=("XMIN", "YMIN", "XMAX", "YMAX"))
