@@ -64,7 +64,14 @@ class SiteOut(_Response):
     name: str
     frame: FrameOut
     vertical_datum: str = Field(description="what local-frame Z (DEM elevations) is measured from")
-    geoid_undulation_m: float = Field(description="N in h = H + N, as stated by the site")
+    geoid_undulation_m: float = Field(
+        description="N in h = H + N at the frame's anchor, from the site's vertical datum"
+    )
+    elevation_datum: str = Field(
+        "WGS84 ellipsoid (no geoid model)",
+        description="the datum of sea-level heights at this site (the readout's elevation_m, "
+        "KML absolute, GPX ele): e.g. 'EGM96 geoid'",
+    )
     heights: str
     crs_wkt: str | None = Field(description="WKT of the DEM grid's 2-D CRS, if known")
     dem: GridOut

@@ -76,6 +76,7 @@ def site_out(state: ConsoleState) -> SiteOut:
         frame=fr,
         vertical_datum=site.dem.vertical_datum,
         geoid_undulation_m=site.geoid_undulation_m,
+        elevation_datum=sea_level_geoid(site).datum,
         heights=_HEIGHTS,
         crs_wkt=site.dem.crs_wkt,
         dem=_grid(g),

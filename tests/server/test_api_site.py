@@ -3,6 +3,7 @@ from __future__ import annotations
 import io
 
 import numpy as np
+import pytest
 from PIL import Image
 from server_helpers import AUTH
 
@@ -19,6 +20,9 @@ def test_site_metadata_describes_frame_grid_and_datum(ro_client, sample_site_dir
     assert (body["dem"]["nrows"], body["dem"]["ncols"]) == g.shape
     assert body["vertical_datum"] == site.dem.vertical_datum
     assert body["geoid_undulation_m"] == site.geoid_undulation_m
+    # The sample site states EGM96: N at the real Bushy Run, and the datum named.
+    assert body["geoid_undulation_m"] == pytest.approx(-33.97, abs=0.01)
+    assert body["elevation_datum"] == "EGM96 geoid"
     assert body["crs_wkt"] == site.dem.crs_wkt
     assert body["sensors"] == sorted(site.sensors)
     lon0, lat0, lon1, lat1 = body["bounds_lonlat"]
