@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from geoid_oracle import rasterio_bilinear, write_gtx, write_linear_tif
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from demtrack.core.errors import DemtrackError, GeoidError
 from demtrack.core.geo.geoid import EGM96_GRID, GeoidModel, as_geoid, find_grid
@@ -134,3 +136,18 @@ def test_constant_and_ellipsoidal_models():
             GeoidModel.constant(bad)  # type: ignore[arg-type]
     with pytest.raises(GeoidError):
         as_geoid(True)  # type: ignore[arg-type]
+
+
+@needs_egm96
+@settings(max_examples=200, deadline=None)
+@given(
+    lat=st.floats(-90.0, 90.0),
+    lon=st.floats(-180.0, 180.0),
+    h=st.floats(-500.0, 9000.0),
+)
+def test_egm96_everywhere_round_trips_and_agrees_with_the_oracle(lat, lon, h):
+    g = GeoidModel.egm96()
+    n = float(g.undulation_m(lat, lon))
+    assert -107.0 < n < 86.0  # EGM96's range on the 15' grid
+    assert n == pytest.approx(float(rasterio_bilinear(EGM96_PATH, lat, lon)), abs=1e-3)
+    assert float(g.to_ellipsoidal(lat, lon, g.to_orthometric(lat, lon, h))) == pytest.approx(h)
