@@ -187,14 +187,13 @@ def _run_import_dem(args: argparse.Namespace) -> int:
         f"  frame anchor lat {frame.lat_deg:.7f} lon {frame.lon_deg:.7f} h {frame.h_m:.3f} m "
         f"(WGS84 ellipsoidal){'' if exists else ', new site'}"
     )
+    n_anchor = float(geoid.undulation_m(frame.lat_deg, frame.lon_deg))
     datum = (
-        f"orthometric, h = H + N with N from {geoid.description}"
+        f"orthometric, h = H + N with N from {geoid.description}, {n_anchor:.3f} m at the anchor"
         if args.vertical_datum == "orthometric"
-        else "ellipsoidal (WGS84)"
+        else f"ellipsoidal (WGS84); site vertical datum: {geoid.datum}"
     )
     print(f"  source heights: {datum}")
-    n_anchor = float(geoid.undulation_m(frame.lat_deg, frame.lon_deg))
-    print(f"  site vertical datum: {geoid.datum} (N = {n_anchor:.3f} m at the anchor)")
     for info, cells in zip(infos, result.tile_cells, strict=True):
         unit = info.z_unit_m(z_unit)
         print(f"  {info.path}: {info.crs_name}, height unit {unit:.10g} m, {cells:,} cells")

@@ -68,7 +68,7 @@ def test_new_site_in_egm96(tmp_path, capsys):
     assert site.geoid.name == "EGM96" and check_dem(site) < 0.01
     n0 = float(rasterio_bilinear(EGM96_DEBIAN, site.frame.lat_deg, site.frame.lon_deg))
     assert doc["geoid_undulation_m"] == pytest.approx(n0, abs=1e-3)
-    assert "site vertical datum: EGM96 geoid" in capsys.readouterr().out
+    assert "N from EGM96 (egm96_15.gtx, evaluated at each point)" in capsys.readouterr().out
 
 
 def test_new_site_with_a_users_grid_copied_in(tmp_path):
