@@ -46,6 +46,10 @@ def _run(args: argparse.Namespace) -> int:
     bounds = tuple(args.bounds) if args.bounds else None
     if args.site is not None:
         site = load_site(args.site)
+        # The points' heights: h = z + N with a site's stated constant N, as before; a site
+        # whose datum is a geoid grid (EGM96) takes them as ellipsoidal (nothing here says
+        # they are orthometric), as it did when such sites stated N = 0.
+        points_n = site.geoid_undulation_m if site.geoid.kind == "constant" else 0.0
         if points_crs:
             e, n, u = points_to_local(
                 pts[:, 0],
@@ -53,7 +57,7 @@ def _run(args: argparse.Namespace) -> int:
                 pts[:, 2],
                 points_crs,
                 site.frame,
-                geoid_undulation_m=site.geoid_undulation_m,
+                geoid_undulation_m=points_n,
             )
             pts = np.column_stack([e, n, u])
         crs_wkt = local_crs_wkt(site.frame)
@@ -85,7 +89,7 @@ def _run(args: argparse.Namespace) -> int:
         ):
             # Another CRS, or heights above a datum: warp into the site frame exactly.
             coarse = read_raster_to_local(
-                args.fill, site.frame, dem.grid, geoid_undulation_m=site.geoid_undulation_m
+                args.fill, site.frame, dem.grid, geoid_undulation_m=points_n
             )
             coarse_dem = Dem(dem.grid, coarse)
         elif not same_crs:
