@@ -202,4 +202,3 @@ def markers_document(state: ConsoleState, fmt: str) -> str:
     times = time_base(None, wall_clock=True)
     write = waypoints_gpx if fmt == "gpx" else waypoints_kml
     return write(points, heights, times, name="demtrack markers")
-

@@ -74,9 +74,9 @@ def waypoints_kml(
     root = ET.Element(f"{_K}kml")
     doc = ET.SubElement(root, f"{_K}Document")
     ET.SubElement(doc, f"{_K}name").text = name
-    ET.SubElement(doc, f"{_K}description").text = (
-        f"{name}; coordinates are lon,lat,alt; {heights.note}; {times.note}"
-    )
+    ET.SubElement(
+        doc, f"{_K}description"
+    ).text = f"{name}; coordinates are lon,lat,alt; {heights.note}; {times.note}"
     for p, alt in zip(points, _absolute(points, heights), strict=True):
         pm = ET.SubElement(doc, f"{_K}Placemark")
         ET.SubElement(pm, f"{_K}name").text = p.name
@@ -85,7 +85,7 @@ def waypoints_kml(
         ET.SubElement(ET.SubElement(pm, f"{_K}TimeStamp"), f"{_K}when").text = times.iso(p.t_s)
         pt = ET.SubElement(pm, f"{_K}Point")
         ET.SubElement(pt, f"{_K}altitudeMode").text = "absolute"
-        ET.SubElement(pt, f"{_K}coordinates").text = (
-            f"{p.lon_deg:.9f},{p.lat_deg:.9f},{float(alt):.3f}"
-        )
+        ET.SubElement(
+            pt, f"{_K}coordinates"
+        ).text = f"{p.lon_deg:.9f},{p.lat_deg:.9f},{float(alt):.3f}"
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"

@@ -162,9 +162,11 @@ def export_markers(
     state: StateDep,
     fmt: Literal["geojson", "csv", "gpx", "kml"] = Query("geojson", alias="format"),
 ) -> Response:
-    """Every marker: GeoJSON (``[lon, lat, h]``, h above the WGS84 ellipsoid), CSV, GPX
-    waypoints or KML placemarks (``<ele>`` / ``absolute`` above the geoid where the site
-    has a geoid model, as the document says)."""
+    """Every marker as GeoJSON, CSV, GPX waypoints or KML placemarks.
+
+    GeoJSON ``[lon, lat, h]`` has h above the WGS84 ellipsoid; GPX ``<ele>`` and KML
+    ``absolute`` are above the geoid where the site has a geoid model, as the file says.
+    """
     if fmt in _XML_MIME:
         return Response(
             markers.markers_document(state, fmt),

@@ -168,8 +168,10 @@ def _egm96_n(lat: float, lon: float) -> float:
     fc, fr = col - 0.5 - c0, row - 0.5 - r0
     q = z[r0 : r0 + 2, c0 : c0 + 2]
     return float(
-        q[0, 0] * (1 - fc) * (1 - fr) + q[0, 1] * fc * (1 - fr)
-        + q[1, 0] * (1 - fc) * fr + q[1, 1] * fc * fr
+        q[0, 0] * (1 - fc) * (1 - fr)
+        + q[0, 1] * fc * (1 - fr)
+        + q[1, 0] * (1 - fc) * fr
+        + q[1, 1] * fc * fr
     )
 
 
