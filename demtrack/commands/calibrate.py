@@ -15,7 +15,8 @@ from .choices import DEFAULT_FREE, FREE_PARAMETERS
 from .common import add_site_argument, non_negative, positive
 
 if TYPE_CHECKING:
-    from demtrack.core.camera.gcp_calibration import GcpFit, LeaveOneOut
+    from demtrack.core.camera.gcp_calibration import GcpFit
+    from demtrack.core.camera.gcp_loo import LeaveOneOut
     from demtrack.core.site.folder import Sensor, Site
 
 __all__ = ["register"]
@@ -179,7 +180,8 @@ def _gcp_json(sensor: Sensor, fit: GcpFit, loo: LeaveOneOut, written: bool) -> d
 
 
 def _run_gcps(args: argparse.Namespace) -> int:
-    from demtrack.core.camera.gcp_calibration import fit_camera_to_gcps, leave_one_out, parse_free
+    from demtrack.core.camera.gcp_calibration import fit_camera_to_gcps, parse_free
+    from demtrack.core.camera.gcp_loo import leave_one_out
     from demtrack.core.camera.gcp_io import gcps_to_local, read_gcp_csv
     from demtrack.core.site.folder import load_site
     from demtrack.core.site.update import read_manifest, write_manifest

@@ -93,12 +93,12 @@ def test_relative_site_with_an_image_writes_back(capsys, site_parent, tmp_path, 
     """Issue 27: '--site site' (relative) with an --image camera died on write-back."""
     monkeypatch.chdir(site_parent)
     gcps = write_gcps("site", tmp_path / "g.csv")
+    want = truth_camera("site").azimuth_tilt_roll_deg()
     status, out, err = run(capsys, "calibrate", "--site", "site", "--sensor", "cam1",
                            "--gcps", gcps)  # fmt: skip
     assert status == 0, err
     assert "Traceback" not in err and "written to site/site.json" in out
     fitted = load_site("site").sensor("cam1")
-    want = truth_camera("site").azimuth_tilt_roll_deg()
     assert fitted.camera.azimuth_tilt_roll_deg() == pytest.approx(want, abs=0.05)
     assert json.loads((site_parent / "site" / "site.json").read_text())["sensors"][0][
         "image"
@@ -111,4 +111,5 @@ def test_relative_site_with_an_image_writes_back(capsys, site_parent, tmp_path, 
     monkeypatch.chdir(site_parent / "site" / "images")
     status, out, err = run(capsys, "calibrate", "--site", "..", "--sensor", "cam1",
                            "--gcps", gcps, "--json")  # fmt: skip
-    assert status == 0, err and json.loads(out)["written"] is True
+    assert status == 0, err
+    assert json.loads(out)["written"] is True
