@@ -351,9 +351,7 @@ def fit_camera_to_gcps(
         for j, name in enumerate(("yaw", "tilt", "roll")):
             if name in free:
                 trial[j] = angles[j]
-        inside = all(
-            model.lo[i] <= trial[model.index[i]] <= model.hi[i] for i in range(p)
-        )
+        inside = all(model.lo[i] <= trial[model.index[i]] <= model.hi[i] for i in range(p))
         if inside and cost(trial) < cost(theta0):
             theta0 = trial
 

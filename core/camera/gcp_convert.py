@@ -171,7 +171,7 @@ def convert_gcps(
 
 
 def gcp_csv_text(gcps: GcpFile) -> str:
-    """demtrack's GCP CSV (``# crs:``/``# vertical:`` header lines, 0-based pixels)."""
+    """Text of demtrack's GCP CSV (``# crs:``/``# vertical:`` header lines, 0-based pixels)."""
     lines = []
     if gcps.crs:
         lines.append(f"# crs: {gcps.crs}")
@@ -214,7 +214,7 @@ def imgraft_rotation(yaw_rad: float, pitch_rad: float, roll_rad: float) -> np.nd
 def angles_from_imgraft(
     yaw_rad: float, pitch_rad: float, roll_rad: float
 ) -> tuple[float, float, float]:
-    """demtrack's ``(az_deg, tilt_deg, roll_deg)`` for an ImGRAFT ``viewdir`` (grid axes)."""
+    """The demtrack ``(az_deg, tilt_deg, roll_deg)`` for an ImGRAFT ``viewdir`` (grid axes)."""
     r_world_cam = imgraft_rotation(yaw_rad, pitch_rad, roll_rad).T
     return Camera(_UNIT_INTRINSICS, np.zeros(3), r_world_cam).azimuth_tilt_roll_deg()
 

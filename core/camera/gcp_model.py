@@ -120,7 +120,9 @@ def parse_bounds(items: Sequence[str]) -> dict[str, tuple[float, float]]:
     out: dict[str, tuple[float, float]] = {}
     for name, (lo, hi) in _pairs(items, "bound", 2).items():
         if not lo < hi:
-            raise CalibrationError(f"--bound {name}={lo:g},{hi:g}: the lower bound must be below the upper")
+            raise CalibrationError(
+                f"--bound {name}={lo:g},{hi:g}: the lower bound must be below the upper"
+            )
         out[name] = (lo, hi)
     return out
 

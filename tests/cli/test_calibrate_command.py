@@ -53,18 +53,21 @@ def site_parent(tmp_path_factory):
         dst.write(z[None].astype("float32"))
     (d / "still.png").write_bytes(b"\x89PNG\r\n\x1a\n" + b"\0" * 64)
     root = d / "site"
-    assert main(["import-dem", "--site", str(root), str(d / "dem.tif"), "--vertical-datum",
-                 "ellipsoidal", "--cell", "2", "--bounds", "-500", "-500", "500", "500"]) == 0  # fmt: skip
-    assert main(["add-camera", "--site", str(root), "--id", "cam1", "--position", str(X0),
-                 str(Y0 - 300), "325", "--crs", UTM, "--vertical-datum", "ellipsoidal", "--az", "10", "--tilt", "-6", "--fx", "1200",
-                 "--width", "1600", "--height", "1200", "--image", str(d / "still.png")]) == 0  # fmt: skip
+    imp = ["import-dem", "--site", root, d / "dem.tif", "--vertical-datum", "ellipsoidal",
+           "--cell", "2", "--bounds", "-500", "-500", "500", "500"]  # fmt: skip
+    assert main([str(a) for a in imp]) == 0
+    add = ["add-camera", "--site", root, "--id", "cam1", "--position", X0, Y0 - 300, 325,
+           "--crs", UTM, "--vertical-datum", "ellipsoidal", "--az", 10, "--tilt", -6,
+           "--fx", 1200, "--width", 1600, "--height", 1200, "--image", d / "still.png"]  # fmt: skip
+    assert main([str(a) for a in add]) == 0
     return d
 
 
 def truth_camera(site):
     cam = load_site(site).sensor("cam1").camera
     az, tilt, roll = cam.azimuth_tilt_roll_deg()
-    return Camera.from_azimuth_tilt_roll(cam.intrinsics, cam.position_enu, az + 1.5, tilt - 0.7, 0.4)
+    pos = cam.position_enu
+    return Camera.from_azimuth_tilt_roll(cam.intrinsics, pos, az + 1.5, tilt - 0.7, 0.4)
 
 
 def write_gcps(site, path, n=12, seed=0, blunder=None, lift=None):
@@ -100,9 +103,10 @@ def test_relative_site_with_an_image_writes_back(capsys, site_parent, tmp_path, 
     assert "Traceback" not in err and "written to site/site.json" in out
     fitted = load_site("site").sensor("cam1")
     assert fitted.camera.azimuth_tilt_roll_deg() == pytest.approx(want, abs=0.05)
-    assert json.loads((site_parent / "site" / "site.json").read_text())["sensors"][0][
-        "image"
-    ] == "images/cam1.png"
+    assert (
+        json.loads((site_parent / "site" / "site.json").read_text())["sensors"][0]["image"]
+        == "images/cam1.png"
+    )
     assert not list((site_parent / "site").glob(".*.part"))
     # The same with an absolute path, then back through a relative one with '..'.
     status, out, err = run(capsys, "calibrate", "--site", site_parent / "site", "--sensor",
