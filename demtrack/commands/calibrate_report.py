@@ -15,7 +15,7 @@ Columns of the per-GCP table:
 ``range m, graze, m/px``
     distance, grazing angle (deg) and ground metres per pixel there;
 ``flags``
-    ``OUTLIER`` (reprojection), ``DEM`` (inconsistent with the DEM: the reason follows),
+    ``OUTLIER, excluded`` / ``OUTLIER, kept`` (reprojection), ``DEM`` (inconsistent with the DEM: the reason follows),
     ``GRAZING``, ``excluded`` (left out of the fit).
 """
 
@@ -45,12 +45,12 @@ def _fmt(x: float, spec: str) -> str:
 def _flags(i: int, fit: GcpFit, dem: DemCheck, loo: LeaveOneOut) -> list[str]:
     notes = []
     if fit.outliers[i]:
-        notes.append("OUTLIER")
+        notes.append("OUTLIER, excluded" if fit.excluded[i] else "OUTLIER, kept")
     if dem.flagged[i]:
         notes.append(f"DEM: {dem.reasons[i]}")
     if loo.grazing[i]:
         notes.append(f"GRAZING (<{loo.grazing_threshold_deg:g} deg)")
-    if fit.excluded[i]:
+    if fit.excluded[i] and not fit.outliers[i]:
         notes.append("excluded")
     if loo.status[i] not in ("ok", "outlier", "excluded"):
         notes.append(f"LOO {loo.status[i]}")
@@ -100,7 +100,7 @@ def print_gcp_report(
             extra.append(f"prior {fit.priors[name][0]:g} +- {fit.priors[name][1]:g}")
         print(
             f"  {name:<6}{fit.values[name]:14.5f}{_fmt(fit.sigmas[name], '12.5f')}  "
-            f"{_UNITS.get(name, ''):<5}{fit.start_values[name]:14.5f}  {'; '.join(extra)}"
+            f"{_UNITS.get(name, ''):<5}{fit.start_values[name]:14.5f}  {'; '.join(extra)}".rstrip()
         )
     print(
         f"  {'GCP':<14}{'du px':>8}{'dv px':>8}{'|r| px':>8}{'dh m':>8}  {'ray':<12}"
@@ -115,7 +115,7 @@ def print_gcp_report(
             f"{_fmt(loo.reprojection_px[i], '8.2f')}{_fmt(loo.ground_error_m[i], '12.2f')}"
             f"{_fmt(loo.vertical_error_m[i], '+11.2f')}{_fmt(loo.range_m[i], '9.1f')}"
             f"{_fmt(loo.grazing_deg[i], '7.1f')}{_fmt(loo.m_per_px[i], '7.2f')}  "
-            f"{'; '.join(_flags(i, fit, dem, loo))}"
+            f"{'; '.join(_flags(i, fit, dem, loo))}".rstrip()
         )
     s = _loo_summary(fit, dem, loo)
     for key, label in (("kept_dem_consistent", "kept, DEM-consistent"), ("all", "all")):
