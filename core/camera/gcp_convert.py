@@ -70,7 +70,8 @@ def read_imgraft_gcps(path: str | Path) -> GcpFile:
     Returns
     -------
     GcpFile
-        ``uv`` = ImGRAFT's pixel minus 1; ``xyz`` as given; no CRS (the file has none).
+        ``uv`` = ImGRAFT's pixel minus 1; ``xyz`` as given; no CRS (the file has none);
+        each point named after its line, ``line7``.
 
     Raises
     ------
@@ -85,6 +86,7 @@ def read_imgraft_gcps(path: str | Path) -> GcpFile:
     except UnicodeDecodeError:
         raise InputFileError(f"GCP file {path} is not UTF-8 text") from None
     rows: list[list[float]] = []
+    lines_no: list[int] = []
     for k, line in enumerate(text.splitlines(), start=1):
         s = line.split("%", 1)[0].strip()
         if not s or s.startswith("#"):
@@ -99,10 +101,11 @@ def read_imgraft_gcps(path: str | Path) -> GcpFile:
                 f"ImGRAFT GCP file {path}: line {k} must hold five numbers x y z u v, got {s!r}"
             )
         rows.append(vals)
+        lines_no.append(k)
     if not rows:
         raise InputFileError(f"ImGRAFT GCP file {path} has no control points")
     arr = np.asarray(rows, dtype=np.float64)
-    names = tuple(f"#{i + 1}" for i in range(len(rows)))
+    names = tuple(f"line{k}" for k in lines_no)
     return GcpFile(names, arr[:, 3:5] - 1.0, arr[:, 0:3], None, None)
 
 
@@ -179,7 +182,9 @@ def gcp_csv_text(gcps: GcpFile) -> str:
         lines.append(f"# vertical: {gcps.vertical}")
     lines.append("name,u,v,x,y,z")
     for name, (u, v), (x, y, z) in zip(gcps.names, gcps.uv, gcps.xyz, strict=True):
-        safe = name.replace(",", " ")
+        safe = name.replace(",", " ").strip()
+        if safe.startswith("#"):  # would read as a comment line
+            safe = "gcp" + safe.lstrip("#")
         lines.append(f"{safe},{u:.6f},{v:.6f},{x:.6f},{y:.6f},{z:.6f}")
     return "\n".join(lines) + "\n"
 

@@ -50,7 +50,9 @@ def case():
 def noisy(case):
     rng = np.random.default_rng(0)
     n = rng.normal(0, 0.5, (len(case.gcps), 2))
-    return [Gcp(g.name, g.u + du, g.v + dv, g.p_enu) for g, (du, dv) in zip(case.gcps, n, strict=True)]
+    return [
+        Gcp(g.name, g.u + du, g.v + dv, g.p_enu) for g, (du, dv) in zip(case.gcps, n, strict=True)
+    ]
 
 
 def start(case, intr=None, move_m=(4.0, -3.0, 6.0)):
