@@ -86,7 +86,11 @@ def write_gcps(site, path, n=12, seed=0, blunder=None, lift=None):
         if blunder is not None and len(rows) == blunder:
             uu += 40.0
         if lift is not None and len(rows) == lift:
+            # A point 2.5 m above the terrain (a mast top), seen where it is: consistent
+            # with the camera, not with the DEM.
             p[2] += 2.5
+            pu, pv, _ = cam.project(p)
+            uu, vv = float(pu[0]) + rng.normal(0, 0.3), float(pv[0]) + rng.normal(0, 0.3)
         rows.append(f"g{len(rows)},{uu:.3f},{vv:.3f},{p[0]:.4f},{p[1]:.4f},{p[2]:.4f}")
     path.write_text("# crs: local\nname,u,v,x,y,z\n" + "\n".join(rows) + "\n")
     return path
@@ -117,3 +121,111 @@ def test_relative_site_with_an_image_writes_back(capsys, site_parent, tmp_path, 
                            "--gcps", gcps, "--json")  # fmt: skip
     assert status == 0, err
     assert json.loads(out)["written"] is True
+
+
+def test_report_flags_a_blunder_and_a_gcp_above_the_dem(capsys, site_parent, tmp_path):
+    site = site_parent / "site"
+    gcps = write_gcps(site, tmp_path / "g.csv", n=14, blunder=3, lift=6)
+    argv = ["calibrate", "--site", site, "--sensor", "cam1", "--gcps", gcps, "--dry-run"]
+    status, out, err = run(capsys, *argv, "--free", "yaw,tilt,roll,fx,fy")
+    assert status == 0, err
+    rows = {ln.split()[0]: ln for ln in out.splitlines()[5:] if ln.startswith("  g")}
+    assert "OUTLIER, excluded" in rows["g3"] and "OUTLIER" not in rows["g6"]
+    assert "DEM: height 2.50 m above the DEM" in rows["g6"] and "passes over" in rows["g6"]
+    assert sum("DEM:" in r for r in rows.values()) == 1
+    assert "over the 13 GCPs kept in the fit" in out and "over all 14 GCPs" in out
+    assert "dry run: site.json not changed" in out
+    for col in ("LOO horiz m", "LOO vert m", "dh m", "ray"):
+        assert col in out
+    status, out, err = run(capsys, *argv, "--free", "yaw,tilt,roll,fx,fy", "--json",
+                           "--exclude-dem-flagged")  # fmt: skip
+    doc = json.loads(out)
+    assert doc["n_kept"] == 12 and doc["gcps"][6]["excluded"] and doc["gcps"][6]["dem_flagged"]
+    assert doc["gcps"][6]["dh_m"] == pytest.approx(2.5, abs=0.05)
+    assert set(doc["sigmas"]) == {"yaw", "tilt", "roll", "fx", "fy"}
+    assert len(doc["covariance"]) == 5 and doc["rmse_all_px"] > doc["rmse_kept_px"]
+    assert doc["leave_one_out"]["kept_dem_consistent"]["horizontal_rms_m"] < 1.0
+
+
+def test_imgraft_file_through_convert_gcps_and_directly(capsys, site_parent, tmp_path):
+    site = site_parent / "site"
+    csv = write_gcps(site, tmp_path / "g.csv", n=10)
+    s = load_site(site)
+    rows = [r.split(",") for r in csv.read_text().splitlines()[2:]]
+    # ImGRAFT: x y z u v in a projected CRS, 1-based pixels.
+    to_utm = Transformer.from_crs("EPSG:4979", "EPSG:32617", always_xy=True)
+    lines = ["% GCPs for cam1", "% X Y Z U V"]
+    for r in rows:
+        lat, lon, h = s.frame.to_geodetic(float(r[3]), float(r[4]), float(r[5]))
+        x, y, z = to_utm.transform(lon, lat, h)
+        lines.append(f"{x:.4f} {y:.4f} {z:.4f} {float(r[1]) + 1:.3f} {float(r[2]) + 1:.3f}")
+    (tmp_path / "g.txt").write_text("\n".join(lines) + "\n")
+    status, out, err = run(capsys, "convert-gcps", tmp_path / "g.txt", "-o", tmp_path / "c.csv",
+                           "--format", "imgraft", "--crs", "EPSG:32617", "--vertical",
+                           "ellipsoidal")  # fmt: skip
+    assert status == 0, err and "10 GCPs" in out
+    common = ["calibrate", "--site", site, "--sensor", "cam1", "--dry-run", "--json"]
+    a = json.loads(run(capsys, *common, "--gcps", tmp_path / "c.csv")[1])
+    b = json.loads(run(capsys, *common, "--gcps", tmp_path / "g.txt", "--gcp-format",
+                       "imgraft", "--gcp-crs", "EPSG:32617", "--gcp-vertical",
+                       "ellipsoidal")[1])  # fmt: skip
+    c = json.loads(run(capsys, *common, "--gcps", csv)[1])
+    for name in ("yaw", "tilt", "roll"):
+        assert a["values"][name] == pytest.approx(c["values"][name], abs=1e-5)
+        assert b["values"][name] == pytest.approx(c["values"][name], abs=1e-5)
+
+
+def _refused(capsys, root, argv, message):
+    before = snapshot(root)
+    status, out, err = run(capsys, *argv)
+    assert status == 2, (out, err)
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert message in err, err
+    assert snapshot(root) == before and not list(root.rglob("*.part"))
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--free", "yaw,zoom"], "unknown parameter(s) zoom"),
+        (["--free", "f,fx"], "free either f or fx,fy"),
+        (["--free", "yaw,fx", "--bound", "fx=2000,3000"], "excludes its starting value 1200"),
+        (["--free", "yaw,fx", "--bound", "fx=1300,1100"], "lower bound must be below"),
+        (["--free", "yaw,fx", "--bound", "tilt=-10,0"], "'tilt' is not a free parameter"),
+        (["--free", "yaw,fx", "--prior", "fx=1200"], "is malformed: write NAME=VALUE,SIGMA"),
+        (["--free", "yaw,x,y,z", "--prior-position", "1,2"], "write E,N,U,SIGMA"),
+        (["--free", "yaw,x,y,z", "--prior-position", "1,2,3,-1"], "write E,N,U,SIGMA"),
+    ],
+)
+def test_bad_options_are_one_line_and_write_nothing(capsys, site_parent, tmp_path, extra, message):
+    site = site_parent / "site"
+    gcps = write_gcps(site, tmp_path / "g.csv", n=8)
+    _refused(capsys, site, ["calibrate", "--site", site, "--sensor", "cam1", "--gcps", gcps,
+                            *extra], message)  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("text", "fmt", "message"),
+    [
+        ("# crs: local\nname,u,v,x,y,z\na,1,2,three,4,5\n", "csv", "data row 1 is malformed"),
+        ("# crs: local\nname,u,v,x\na,1,2,3\n", "csv", "missing y,z"),
+        ("# crs: local\nname,u,v,x,y,z\na,700,900,0,5000,0\nb,800,900,10,100,0\n", "csv",
+         "'a' at E 0.0 N 5000.0 m is outside the DEM"),
+        ("1 2 3 4\n", "imgraft", "line 1 must hold five numbers"),
+    ],
+)  # fmt: skip
+def test_bad_gcp_files_are_one_line_and_write_nothing(capsys, site_parent, tmp_path, text, fmt,
+                                                     message):  # fmt: skip
+    site = site_parent / "site"
+    (tmp_path / "bad.txt").write_text(text)
+    _refused(capsys, site, ["calibrate", "--site", site, "--sensor", "cam1", "--gcps",
+                            tmp_path / "bad.txt", "--gcp-format", fmt, "--gcp-crs", "local"],
+             message)  # fmt: skip
+
+
+def test_convert_gcps_refuses_without_a_crs_and_writes_nothing(capsys, tmp_path):
+    (tmp_path / "g.txt").write_text("1 2 3 4 5\n")
+    status, out, err = run(capsys, "convert-gcps", tmp_path / "g.txt", "-o", tmp_path / "o.csv",
+                           "--format", "imgraft")  # fmt: skip
+    assert status == 2 and "pass --crs" in err and err.count("\n") == 1
+    assert not (tmp_path / "o.csv").exists() and not list(tmp_path.glob("*.part"))
