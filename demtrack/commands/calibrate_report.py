@@ -15,8 +15,8 @@ Columns of the per-GCP table:
 ``range m, graze, m/px``
     distance, grazing angle (deg) and ground metres per pixel there;
 ``flags``
-    ``OUTLIER, excluded`` / ``OUTLIER, kept`` (reprojection), ``DEM`` (inconsistent with the DEM: the reason follows),
-    ``GRAZING``, ``excluded`` (left out of the fit).
+    ``OUTLIER, excluded`` / ``OUTLIER, kept`` (reprojection), ``DEM`` (inconsistent with
+    the DEM: the reason follows), ``GRAZING``, ``excluded`` (left out of the fit).
 """
 
 from __future__ import annotations
