@@ -229,3 +229,73 @@ def test_convert_gcps_refuses_without_a_crs_and_writes_nothing(capsys, tmp_path)
                            "--format", "imgraft")  # fmt: skip
     assert status == 2 and "pass --crs" in err and err.count("\n") == 1
     assert not (tmp_path / "o.csv").exists() and not list(tmp_path.glob("*.part"))
+
+
+# ------------------------------------------------------------------ real material
+
+
+def test_real_case_through_import_dem_add_camera_and_calibrate(capsys, tmp_path):
+    """weitsicht's tennis case the way a user would run it: the real DEM through
+    import-dem, the peer's camera through add-camera (grid azimuth), its ground points as a
+    GCP CSV in the DEM's CRS; calibrate from a start 1 deg off recovers the peer's pose."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "core" / "camera"))
+    from weitsicht_tennis import CRS, DATA, _case, available, rotation_error_deg
+
+    if not available():
+        pytest.skip("weitsicht data not on this machine")
+    case = _case()
+    ref = case["peer_reference"]
+    pose = ref["pose_conversion"]
+    root = tmp_path / "tennis"
+    x, y, _ = ref["grid"][12]["xyz"]
+    imp = ["import-dem", "--site", root, DATA / "dem_01_gda94_mga55_ahd.tif", "--vertical-datum",
+           "orthometric", "--geoid-undulation", 0, "--cell", 5, "--bounds", -700, -700, 700,
+           700, "--anchor", *_anchor(x, y, ref["grid"][12]["xyz"][2])]  # fmt: skip
+    status, out, err = run(capsys, *imp)
+    assert status == 0, err
+    r_grid = np.array(pose["R_world_cam_opencv_axes_in_dem_crs"])
+    from demtrack.core.camera.pinhole import Intrinsics
+
+    az, tilt, roll = Camera(
+        Intrinsics(1, 1, 0, 0, 1, 1), np.zeros(3), r_grid
+    ).azimuth_tilt_roll_deg()
+    cam = case["camera"]
+    w, h = case["image_size_px"]
+    lens = ["--fx", cam["fx"], "--fy", cam["fy"], "--cx", cam["cx"], "--cy", cam["cy"], "--width",
+            w, "--height", h, "--k1", cam["k1"], "--k2", cam["k2"], "--k3", cam["k3"], "--p1",
+            cam["p1"], "--p2", cam["p2"]]  # fmt: skip
+    pos = pose["position_in_dem_crs"]
+    add = ["add-camera", "--site", root, "--id", "peer", "--position", *pos, "--crs", CRS,
+           "--vertical-datum", "orthometric", "--north", "grid", "--az", az, "--tilt", tilt,
+           "--roll", roll, *lens]  # fmt: skip
+    status, out, err = run(capsys, *add)
+    assert status == 0, err
+    peer = load_site(root).sensor("peer").camera
+    # The site's start: 1 deg off in azimuth, 0.5 deg in tilt.
+    start = [*add[:-len(lens) - 6], "--az", az + 1.0, "--tilt", tilt + 0.5, "--roll", roll,
+             *lens, "--replace"]  # fmt: skip
+    start[start.index("peer")] = "cam"
+    assert run(capsys, *start)[0] == 0
+    rows = ["# crs: " + CRS, "# vertical: orthometric", "name,u,v,x,y,z"]
+    for p in [*ref["grid"], *ref["example_points_01_02_tennis_court"]]:
+        rows.append(f"{p['id']},{p['pixel_center_origin'][0]},{p['pixel_center_origin'][1]},"
+                    f"{p['xyz'][0]},{p['xyz'][1]},{p['xyz'][2]}")  # fmt: skip
+    (tmp_path / "gcps.csv").write_text("\n".join(rows) + "\n")
+    status, out, err = run(capsys, "calibrate", "--site", root, "--sensor", "cam", "--gcps",
+                           tmp_path / "gcps.csv", "--free", "yaw,tilt,roll", "--json")  # fmt: skip
+    assert status == 0, err
+    doc = json.loads(out)
+    fitted = load_site(root).sensor("cam").camera
+    # The remaining difference is the peer's grid-as-Cartesian geometry (see
+    # tests/core/camera/test_gcp_weitsicht_peer.py): hundredths of a degree at most.
+    assert rotation_error_deg(fitted, peer) < 0.02
+    assert doc["rmse_kept_px"] < 2.0 and not any(g["dem_flagged"] for g in doc["gcps"])
+    assert doc["leave_one_out"]["kept_dem_consistent"]["horizontal_rms_m"] < 0.3
+
+
+def _anchor(x, y, h):
+    lon, lat = Transformer.from_crs("EPSG:28355", "EPSG:4326", always_xy=True).transform(x, y)
+    return [round(lat, 7), round(lon, 7), round(h, 3)]
