@@ -16,6 +16,8 @@ Oracles:
   ENU, where horizontal distances are the grid's divided by the grid scale factor ``k``
   (0.9997 here). So a fit with fixed position finds ``fx * k``, not ``fx``: about 3.9 px
   less, and the test expects exactly that (from PROJ's scale factor), not zero.
+* Leave-one-out horizontal ground errors no worse than the peer's camera gives for the
+  same pixels on the same DEM.
 * Outliers: three GCPs moved by 30 px are flagged as reprojection outliers, three whose
   height is raised 1-3 m above the DEM are flagged by the DEM check ("above the DEM", the
   ray passes over them), and no other.
@@ -37,6 +39,7 @@ from demtrack.core.camera.gcp_dem_check import check_gcps_on_dem
 from demtrack.core.camera.gcp_io import Gcp
 from demtrack.core.camera.gcp_loo import leave_one_out
 from demtrack.core.camera.pinhole import Camera, Intrinsics
+from demtrack.core.raycast.cast import cast_rays
 
 pytestmark = pytest.mark.skipif(not available(), reason="weitsicht data not on this machine")
 
@@ -194,6 +197,16 @@ def test_blunders_and_gcps_above_the_dem_are_flagged(case, noisy):
     h = loo.horizontal_error_m[clean]
     # 0.5 px at 7.5 cm/px: decimetres on the ground, horizontally and vertically.
     assert np.sqrt(np.mean(h**2)) < 0.15 and np.abs(loo.vertical_error_m[clean]).max() < 0.3
+    # No worse than the peer's own camera geolocating the same (noisy) pixels.
+    idx = np.flatnonzero(clean)
+    o, d = case.camera.pixel_to_ray(
+        np.array([gcps[i].u for i in idx]), np.array([gcps[i].v for i in idx])
+    )
+    hits = cast_rays(case.dem, o, d, 5000.0, mode="first")
+    p_hit = hits.points[hits.offsets[: len(idx)]]
+    q = np.array([gcps[i].p_enu for i in idx])
+    peer_h = np.hypot(p_hit[:, 0] - q[:, 0], p_hit[:, 1] - q[:, 1])
+    assert np.sqrt(np.mean(h**2)) <= np.sqrt(np.mean(peer_h**2))
     # Excluding the DEM-flagged GCPs too leaves the fit on the 36 clean ones.
     again = fit_camera_to_gcps(start(case), gcps, "yaw,tilt,roll,x,y,z".split(","),
                                exclude=np.asarray(dem.flagged))  # fmt: skip
