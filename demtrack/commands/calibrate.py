@@ -90,10 +90,14 @@ def _fitted_sensor(site: Site, sensor: Sensor, fit: GcpFit) -> Sensor:
     return Sensor(sensor.id, sensor.name, head, sensor.pan_deg, tilt, sensor.image_path, roll)
 
 
-def _prior_position(text: str | None) -> dict[str, tuple[float, float]]:
-    from demtrack.core.errors import CalibrationError
+def _prior_position(args: argparse.Namespace, site: Site) -> dict[str, tuple[float, float]]:
+    """``--prior-position X,Y,Z,SIGMA`` (in ``--prior-crs``) as priors on x, y, z (site frame)."""
+    from demtrack.core.errors import CalibrationError, DemtrackError
 
+    text = args.prior_position
     if text is None:
+        if args.prior_crs is not None:
+            raise CalibrationError("--prior-crs is given without --prior-position")
         return {}
     try:
         vals = [float(t) for t in text.split(",")]
@@ -101,9 +105,24 @@ def _prior_position(text: str | None) -> dict[str, tuple[float, float]]:
         vals = []
     if len(vals) != 4 or not all(math.isfinite(v) for v in vals) or not vals[3] > 0:
         raise CalibrationError(
-            f"--prior-position {text!r} is malformed: write E,N,U,SIGMA (site frame, m; SIGMA > 0)"
+            f"--prior-position {text!r} is malformed: write X,Y,Z,SIGMA (SIGMA > 0, m)"
         )
-    return {n: (v, vals[3]) for n, v in zip(("x", "y", "z"), vals[:3], strict=True)}
+    crs = args.prior_crs or "local"
+    if crs.strip().lower() == "local":
+        xyz = vals[:3]
+    else:
+        if args.prior_vertical is None:
+            raise CalibrationError(
+                "--prior-position in a CRS needs --prior-vertical ellipsoidal|orthometric"
+            )
+        n = site.geoid_undulation_m if args.prior_vertical == "orthometric" else 0.0
+        try:
+            xyz = [
+                float(v) for v in site.frame.to_enu_from_crs(*vals[:3], crs, geoid_undulation_m=n)
+            ]
+        except DemtrackError as exc:
+            raise CalibrationError(f"--prior-position: {exc}") from None
+    return {n: (v, vals[3]) for n, v in zip(("x", "y", "z"), xyz, strict=True)}
 
 
 def _run_gcps(args: argparse.Namespace) -> int:
@@ -124,11 +143,11 @@ def _run_gcps(args: argparse.Namespace) -> int:
     free = parse_free(args.free)
     bounds = parse_bounds(args.bound or [])
     priors = parse_priors(args.prior or [])
-    for name, value in _prior_position(args.prior_position).items():
+    site = load_site(args.site)
+    for name, value in _prior_position(args, site).items():
         if name in priors:
             raise CalibrationError(f"--prior {name} and --prior-position both give {name}")
         priors[name] = value
-    site = load_site(args.site)
     sensor = site.sensor(args.sensor)
     gcps = gcps_to_local(
         read_gcps(args.gcps, args.gcp_format),
@@ -229,9 +248,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="prior on a free parameter, an extra residual (repeatable)",
     )  # fmt: skip
     p.add_argument(
-        "--prior-position", metavar="E,N,U,SIGMA",
-        help="surveyed optical centre (site frame, m) and its 1-sigma (m): priors on x,y,z",
+        "--prior-position", metavar="X,Y,Z,SIGMA",
+        help="surveyed optical centre and its 1-sigma (m): priors on x,y,z",
     )  # fmt: skip
+    p.add_argument("--prior-crs", metavar="CRS", help="CRS of --prior-position (default local)")
+    p.add_argument(
+        "--prior-vertical", choices=("ellipsoidal", "orthometric"), help="its height's datum"
+    )
     p.add_argument(
         "--pixel-sigma", type=positive, default=1.0, metavar="PX",
         help="pixel noise the priors are weighed against (default 1 px)",

@@ -193,8 +193,13 @@ def _refused(capsys, root, argv, message):
         (["--free", "yaw,fx", "--bound", "fx=1300,1100"], "lower bound must be below"),
         (["--free", "yaw,fx", "--bound", "tilt=-10,0"], "'tilt' is not a free parameter"),
         (["--free", "yaw,fx", "--prior", "fx=1200"], "is malformed: write NAME=VALUE,SIGMA"),
-        (["--free", "yaw,x,y,z", "--prior-position", "1,2"], "write E,N,U,SIGMA"),
-        (["--free", "yaw,x,y,z", "--prior-position", "1,2,3,-1"], "write E,N,U,SIGMA"),
+        (["--free", "yaw,x,y,z", "--prior-position", "1,2"], "write X,Y,Z,SIGMA"),
+        (["--free", "yaw,x,y,z", "--prior-position", "1,2,3,-1"], "write X,Y,Z,SIGMA"),
+        (
+            ["--free", "yaw,x,y,z", "--prior-position", "1,2,3,1", "--prior-crs", "EPSG:32617"],
+            "needs --prior-vertical",
+        ),
+        (["--free", "yaw,x,y,z", "--prior-crs", "EPSG:32617"], "without --prior-position"),
     ],
 )
 def test_bad_options_are_one_line_and_write_nothing(capsys, site_parent, tmp_path, extra, message):
@@ -299,3 +304,21 @@ def test_real_case_through_import_dem_add_camera_and_calibrate(capsys, tmp_path)
 def _anchor(x, y, h):
     lon, lat = Transformer.from_crs("EPSG:28355", "EPSG:4326", always_xy=True).transform(x, y)
     return [round(lat, 7), round(lon, 7), round(h, 3)]
+
+
+def test_prior_position_in_utm_pins_the_camera(capsys, site_parent, tmp_path):
+    site = site_parent / "site"
+    gcps = write_gcps(site, tmp_path / "g.csv", n=10)
+    s = load_site(site)
+    cam = s.sensor("cam1").camera
+    lat, lon, h = s.frame.to_geodetic(*cam.position_enu)
+    x, y = TO_UTM.transform(lon, lat)
+    common = ["calibrate", "--site", site, "--sensor", "cam1", "--gcps", gcps, "--dry-run",
+              "--json", "--free", "yaw,tilt,roll,x,y,z"]  # fmt: skip
+    status, out, err = run(capsys, *common, "--prior-position", f"{x:.4f},{y:.4f},{h:.4f},0.001",
+                           "--prior-crs", UTM, "--prior-vertical", "ellipsoidal")  # fmt: skip
+    assert status == 0, err
+    doc = json.loads(out)
+    got = [doc["values"][k] for k in ("x", "y", "z")]
+    assert got == pytest.approx(list(cam.position_enu), abs=0.01)
+    assert doc["priors"]["x"][1] == 0.001 and doc["sigmas"]["z"] < 0.002
