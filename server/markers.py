@@ -181,8 +181,9 @@ def markers_geojson(state: ConsoleState) -> dict[str, Any]:
 def markers_document(state: ConsoleState, fmt: str) -> str:
     """The markers as GPX waypoints or KML placemarks (orthometric heights; see the docs).
 
-    ``<ele>`` / KML ``absolute`` are heights above the geoid where the site has a model
-    (EGM96 with the grid installed), else ellipsoidal, and the document says which.
+    ``<ele>`` / the KML altitude are heights above the site's geoid (EGM96 on the sample
+    site; :func:`~demtrack.server.track_export.site_heights`), else ellipsoidal, and the
+    document says which; KML placemarks are ``clampToGround`` (markers are on the ground).
     """
     from ..core.io.export_waypoints import Waypoint, waypoints_gpx, waypoints_kml
     from .track_export import site_heights, time_base
@@ -200,5 +201,10 @@ def markers_document(state: ConsoleState, fmt: str) -> str:
     ]
     heights = site_heights(state.site)
     times = time_base(None, wall_clock=True)
-    write = waypoints_gpx if fmt == "gpx" else waypoints_kml
-    return write(points, heights, times, name="demtrack markers")
+    if fmt == "gpx":
+        return waypoints_gpx(points, heights, times, name="demtrack markers")
+    # Markers mark places on the ground: clamped there in Google Earth, whose terrain may
+    # differ from the site's DEM by metres (the orthometric altitude stays in the file).
+    return waypoints_kml(
+        points, heights, times, name="demtrack markers", altitude_mode="clampToGround"
+    )

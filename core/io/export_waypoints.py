@@ -15,6 +15,7 @@ from xml.etree import ElementTree as ET
 import gpxpy.gpx
 import numpy as np
 
+from ..errors import TrackingError
 from .export_common import HeightModel, TimeBase
 
 __all__ = ["Waypoint", "waypoints_gpx", "waypoints_kml"]
@@ -67,16 +68,32 @@ def waypoints_gpx(
 
 
 def waypoints_kml(
-    points: Sequence[Waypoint], heights: HeightModel, times: TimeBase, *, name: str
+    points: Sequence[Waypoint],
+    heights: HeightModel,
+    times: TimeBase,
+    *,
+    name: str,
+    altitude_mode: str = "absolute",
 ) -> str:
-    """KML 2.2 with one ``<Placemark>`` per point (``absolute`` = ``heights.absolute``)."""
+    """KML 2.2 with one ``<Placemark>`` per point (altitude = ``heights.absolute``).
+
+    ``altitude_mode``: ``"absolute"`` (the altitude, orthometric with a geoid model, is
+    where the point is drawn) or ``"clampToGround"`` (points that mark places on the
+    ground: the viewer drapes them on its own terrain, which may differ from the site's
+    DEM by metres; the orthometric altitude stays in the coordinates for readers).
+    """
+    if altitude_mode not in ("absolute", "clampToGround"):
+        raise TrackingError(
+            f"altitude_mode must be absolute or clampToGround, got {altitude_mode!r}"
+        )
     ET.register_namespace("", _KML_NS)
     root = ET.Element(f"{_K}kml")
     doc = ET.SubElement(root, f"{_K}Document")
     ET.SubElement(doc, f"{_K}name").text = name
-    ET.SubElement(
-        doc, f"{_K}description"
-    ).text = f"{name}; coordinates are lon,lat,alt; {heights.note}; {times.note}"
+    ET.SubElement(doc, f"{_K}description").text = (
+        f"{name}; coordinates are lon,lat,alt; {heights.note}; altitudeMode {altitude_mode}"
+        f"{' (placed on the ground)' if altitude_mode == 'clampToGround' else ''}; {times.note}"
+    )
     for p, alt in zip(points, _absolute(points, heights), strict=True):
         pm = ET.SubElement(doc, f"{_K}Placemark")
         ET.SubElement(pm, f"{_K}name").text = p.name
@@ -84,7 +101,7 @@ def waypoints_kml(
             ET.SubElement(pm, f"{_K}description").text = p.description
         ET.SubElement(ET.SubElement(pm, f"{_K}TimeStamp"), f"{_K}when").text = times.iso(p.t_s)
         pt = ET.SubElement(pm, f"{_K}Point")
-        ET.SubElement(pt, f"{_K}altitudeMode").text = "absolute"
+        ET.SubElement(pt, f"{_K}altitudeMode").text = altitude_mode
         ET.SubElement(
             pt, f"{_K}coordinates"
         ).text = f"{p.lon_deg:.9f},{p.lat_deg:.9f},{float(alt):.3f}"
