@@ -1,6 +1,8 @@
 """Geodesy and coordinate reference systems.
 
 The site's local east-north-up frame anchored to WGS84 (exact through ECEF with pyproj), CRS
-parsing and units, and warping rasters and point clouds from any CRS into the site frame.
+parsing and units, geoid models (the undulation N(lat, lon) of a site's vertical datum:
+EGM96 or any PROJ grid evaluated per point, a constant, or none; :mod:`.geoid`), and
+warping rasters and point clouds from any CRS into the site frame.
 Imports only ``core.errors``; every other package may import it.
 """
