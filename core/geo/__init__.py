@@ -1,6 +1,7 @@
 """Geodesy and coordinate reference systems.
 
 The site's local east-north-up frame anchored to WGS84 (exact through ECEF with pyproj), CRS
-parsing and units, and warping rasters and point clouds from any CRS into the site frame.
-Imports only ``core.errors``; every other package may import it.
+parsing and units, the grid references the field uses (UTM and MGRS, ``grid_ref``), and
+warping rasters and point clouds from any CRS into the site frame. Imports only
+``core.errors``; every other package may import it.
 """
