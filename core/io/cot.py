@@ -23,7 +23,8 @@ TAK Server speak). What goes in:
   (m, 68.27 % two-sided). Unknown errors are CoT's ``9999999``.
 
 The detail carries ``contact`` (callsign), ``track`` (course, degrees clockwise from true
-north, and speed, m/s) when known, and ``remarks`` (MGRS and a free text).
+north, and speed, m/s) when known, ``remarks`` (MGRS and a free text), and for a delete
+(``t-x-d-d``) the ``link`` to the removed uid with ``__forcedelete``.
 """
 
 from __future__ import annotations
@@ -222,6 +223,9 @@ class CotEvent:
         Free text (the MGRS reference goes here).
     course_deg, speed_mps : float or None
         Heading clockwise from true north and ground speed, when known.
+    link_uid : str or None
+        For a delete (type ``t-x-d-d``): the uid of the event it removes (written as
+        ``<link uid=... relation="none"/>`` and ``<__forcedelete/>``, as TAK takes it).
     """
 
     uid: str
@@ -239,6 +243,7 @@ class CotEvent:
     remarks: str = ""
     course_deg: float | None = None
     speed_mps: float | None = None
+    link_uid: str | None = None
 
     def __post_init__(self) -> None:
         """Validate what a TAK peer would refuse."""
@@ -300,6 +305,9 @@ def event_to_xml(ev: CotEvent, *, declaration: bool = False) -> bytes:
             "track",
             {"course": _num(ev.course_deg % 360.0, 2), "speed": _num(ev.speed_mps, 2)},
         )
+    if ev.link_uid:
+        ET.SubElement(detail, "link", {"uid": ev.link_uid, "relation": "none", "type": "none"})
+        ET.SubElement(detail, "__forcedelete")
     if ev.remarks:
         ET.SubElement(detail, "remarks").text = ev.remarks
     body = ET.tostring(root, encoding="unicode", short_empty_elements=True).encode("utf-8")
@@ -334,6 +342,7 @@ def event_from_xml(data: bytes | str) -> CotEvent:
     contact = detail.find("contact") if detail is not None else None
     track = detail.find("track") if detail is not None else None
     remarks = detail.find("remarks") if detail is not None else None
+    link = detail.find("link") if detail is not None else None
     try:
         return CotEvent(
             uid=root.attrib["uid"],
@@ -351,6 +360,7 @@ def event_from_xml(data: bytes | str) -> CotEvent:
             remarks=(remarks.text or "") if remarks is not None else "",
             course_deg=float(track.attrib["course"]) if track is not None else None,
             speed_mps=float(track.attrib["speed"]) if track is not None else None,
+            link_uid=link.attrib.get("uid") if link is not None else None,
         )
     except (ValueError, KeyError) as exc:
         raise InputFileError(f"malformed CoT event: {exc}") from None

@@ -188,6 +188,9 @@ def test_round_trip():
     odd = _event(callsign='a<b & "c"', course_deg=None, speed_mps=None)
     again = event_from_xml(event_to_xml(odd))
     assert again.callsign == 'a<b & "c"' and again.course_deg is None
+    gone = event_from_xml(event_to_xml(_event(type="t-x-d-d", link_uid="demtrack.x.marker.3")))
+    assert gone.link_uid == "demtrack.x.marker.3"
+    assert b"<__forcedelete />" in event_to_xml(_event(link_uid="u"))
 
 
 def test_unknown_errors_are_cots_9999999():
