@@ -22,6 +22,7 @@ import math
 import re
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 from pyproj import Transformer
 
@@ -31,6 +32,7 @@ __all__ = [
     "MGRS_MAX_LAT_DEG",
     "MGRS_MIN_LAT_DEG",
     "UtmRef",
+    "grid_refs",
     "latlon_of_mgrs",
     "mgrs_of",
     "utm_of",
@@ -75,9 +77,37 @@ class UtmRef:
         return (32600 if self.north else 32700) + self.zone
 
     def __str__(self) -> str:
-        """``32N 385734.2 6650941.7`` (zone, hemisphere, easting, northing to 0.1 m)."""
-        hemi = "N" if self.north else "S"
-        return f"{self.zone}{hemi} {self.easting_m:.1f} {self.northing_m:.1f}"
+        """``32V 385734E 6650941N``: zone and band as GPS receivers show them, whole metres.
+
+        The band letter, not a hemisphere letter (``N`` is also a band: 0-8 N); the
+        metres are truncated as MGRS's are.
+        """
+        e, n = math.floor(self.easting_m), math.floor(self.northing_m)
+        return f"{self.zone:02d}{self.band} {e:06d}E {n:07d}N"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: ``zone``, ``band``, ``hemisphere`` (N/S), metres, ``epsg``, ``text``."""
+        return {
+            "zone": self.zone,
+            "band": self.band,
+            "hemisphere": "N" if self.north else "S",
+            "easting_m": self.easting_m,
+            "northing_m": self.northing_m,
+            "epsg": self.epsg,
+            "text": str(self),
+        }
+
+
+def grid_refs(lat_deg: float, lon_deg: float) -> dict[str, Any]:
+    """``{"mgrs": "17T NE 12345 67890", "utm": UtmRef.to_dict()}`` of a WGS84 point.
+
+    Both are None at the poles (UPS, not supported) instead of raising: for documents
+    that carry a grid reference beside every lat/lon.
+    """
+    try:
+        return {"mgrs": mgrs_of(lat_deg, lon_deg), "utm": utm_of(lat_deg, lon_deg).to_dict()}
+    except GeodesyError:
+        return {"mgrs": None, "utm": None}
 
 
 def _check(lat_deg: float, lon_deg: float) -> tuple[float, float]:

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from pyproj import CRS, Geod, Transformer
 
 from demtrack.core.errors import GeodesyError
-from demtrack.core.geo.grid_ref import latlon_of_mgrs, mgrs_of, utm_of, utm_zone_of
+from demtrack.core.geo.grid_ref import grid_refs, latlon_of_mgrs, mgrs_of, utm_of, utm_zone_of
 
 GEOD = Geod(ellps="WGS84")
 PEER = mgrs.MGRS()
@@ -180,3 +180,14 @@ def test_a_square_outside_its_band_is_refused():
     # 31N AA is on the equator; band X (72-84 N) has no AA row there
     with pytest.raises(GeodesyError, match="band"):
         latlon_of_mgrs("31X AA 66021 00000")
+
+
+def test_utm_text_and_json_form():
+    u = utm_of(60.0, 5.0)
+    assert str(u) == "32V 276979E 6658157N"  # the band letter, as GPS receivers show it
+    d = u.to_dict()
+    assert d["hemisphere"] == "N" and d["epsg"] == 32632 and d["text"] == str(u)
+    assert str(utm_of(-45.0, 170.0)).startswith("59G ")
+    assert utm_of(-45.0, 170.0).to_dict()["hemisphere"] == "S"
+    assert grid_refs(0.0, 0.0)["mgrs"] == "31N AA 66021 00000"
+    assert grid_refs(89.0, 0.0) == {"mgrs": None, "utm": None}  # UPS: none, no error
