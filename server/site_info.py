@@ -19,6 +19,7 @@ import numpy as np
 from pyproj import Transformer
 
 from demtrack.core.errors import NotFoundError, QueryError
+from demtrack.core.geo.grid_ref import grid_refs
 from demtrack.core.site.orthophoto import read_orthophoto
 from demtrack.core.site.road_io import roads_to_geojson
 from demtrack.core.terrain.grid import GridSpec
@@ -195,7 +196,8 @@ def elevation_at(state: ConsoleState, e: float, n: float) -> dict[str, Any]:
     ``u_m``: the DEM surface's local-frame up (m), None off the DEM or in a hole; ``h_m``:
     height above the WGS84 ellipsoid of that ground point (of ``u = 0`` when None);
     ``elevation_m``: its orthometric height (None where ``u_m`` is), in
-    ``elevation_datum`` (:func:`orthometric`). :class:`QueryError` for a point more than
+    ``elevation_datum`` (:func:`orthometric`); ``mgrs`` (1 m) and ``utm`` (``17T 629933E
+    4467728N``) of the point, None at the poles. :class:`QueryError` for a point more than
     10 000 km from the anchor.
     """
     if max(abs(e), abs(n)) > 1e7:
@@ -206,6 +208,7 @@ def elevation_at(state: ConsoleState, e: float, n: float) -> dict[str, Any]:
     big_h, datum = orthometric(
         float(lat), float(lon), float(h), float(state.site.geoid_undulation_m)
     )
+    refs = grid_refs(float(lat), float(lon))
     return {
         "e_m": e,
         "n_m": n,
@@ -215,4 +218,7 @@ def elevation_at(state: ConsoleState, e: float, n: float) -> dict[str, Any]:
         "h_m": float(h),
         "elevation_m": None if u is None else big_h,
         "elevation_datum": datum,
+        # grid references of the point (None at the poles)
+        "mgrs": refs["mgrs"],
+        "utm": None if refs["utm"] is None else refs["utm"]["text"],
     }
