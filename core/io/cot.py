@@ -78,6 +78,9 @@ def cot_type_of(cls: str) -> str:
 
 
 _GL_T, _GL_W = np.polynomial.legendre.leggauss(128)
+_SIN = np.sin(_GL_T * (np.pi / 2))
+_COS = np.cos(_GL_T * (np.pi / 2))
+_W = _GL_W * (np.pi / 2) / math.sqrt(2.0 * np.pi)
 
 
 def _circle_probability(r: float, s1: float, s2: float) -> float:
@@ -90,10 +93,9 @@ def _circle_probability(r: float, s1: float, s2: float) -> float:
     """
     from scipy.special import erf
 
-    t = _GL_T * (np.pi / 2)
-    x, y = r * np.sin(t), r * np.cos(t)
-    f = np.exp(-0.5 * (x / s1) ** 2) * erf(y / (s2 * math.sqrt(2.0))) * y
-    return float(np.sum(_GL_W * f) * (np.pi / 2) / (s1 * math.sqrt(2.0 * np.pi)))
+    y = r * _COS
+    f = np.exp(-0.5 * (r * _SIN / s1) ** 2) * erf(y / (s2 * math.sqrt(2.0))) * y
+    return float(_W @ f) / s1
 
 
 def circular_error_m(cov_en_m2: Sequence[Sequence[float]] | np.ndarray) -> float:
