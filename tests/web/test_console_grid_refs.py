@@ -64,3 +64,22 @@ def test_geolocation_table_shows_each_hits_mgrs_and_utm(page, fed_server):
     SHOTS.mkdir(parents=True, exist_ok=True)
     page.locator("#geo-result").screenshot(path=str(SHOTS / "geolocation_mgrs_utm.png"))
     assert page.record.errors == []
+
+
+def test_marker_list_shows_mgrs_and_utm(page, fed_server):
+    open_console(page, fed_server)
+    with fed_server.client() as c:
+        r = c.post(
+            "/api/markers", json={"t_s": 1_767_225_600.0, "name": "OP2", "e_m": 40.0, "n_m": 10.0}
+        )
+        assert r.status_code == 201, r.text
+        m = r.json()
+    page.wait_for_selector(f"#marker-list > div[data-marker='{m['id']}'] [data-utm]")
+    row = page.locator(f"#marker-list > div[data-marker='{m['id']}']")
+    assert row.locator("[data-mgrs]").text_content() == m["mgrs"]
+    theirs = mgrs.MGRS().toMGRS(m["lat_deg"], m["lon_deg"], MGRSPrecision=5)
+    utm = _utm_text(m["lat_deg"], m["lon_deg"], int(theirs[:2]), theirs[2])
+    assert row.locator("[data-utm]").text_content() == f"UTM {utm}" == f"UTM {m['utm']}"
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    row.screenshot(path=str(SHOTS / "marker_mgrs_utm.png"))
+    assert page.record.errors == []
