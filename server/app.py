@@ -48,6 +48,7 @@ from .api import (
 )
 from .api.deps import READER
 from .api.errors import error_responses, install_error_handlers
+from .cot.service import start_cot_sender
 from .hub import Hub
 from .ingest.pipeline import Pipeline, Publisher, pipeline_options
 from .replay import Replay, scenario_stream, start_time_after
@@ -56,6 +57,7 @@ from .security import RequestGate, install_log_redaction, resolve_token
 from .settings import Settings
 from .state import ConsoleState
 from .store.database import Store
+from .store.markers import list_markers
 from .stream import endpoint as stream
 
 __all__ = ["check_startup", "create_app"]
@@ -228,6 +230,21 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     subscribers: list[Publisher] = [hub.publish_threadsafe]
     if scene is not None:
         subscribers.append(scene.publish)  # the 3D scene follows the same stream as /ws
+    cot = None
+    if settings.cot_url:  # CoT to TAK follows it too, through a queue that drops
+        cot = await run_in_threadpool(
+            start_cot_sender,
+            settings.cot_url,
+            site_,
+            store.store_id,
+            list_markers(store),
+            track_stale_s=settings.cot_stale_s,
+            marker_stale_s=settings.cot_marker_stale_s,
+            queue_size=settings.cot_queue_size,
+        )
+        subscribers.append(cot.publish)
+        log.info("sending CoT to %s", settings.cot_url)
+    app.state.cot = cot
     pipeline = Pipeline(
         site_, store, settings.tracker_method, _fan_out(subscribers), **pipeline_options(settings)
     )
@@ -256,6 +273,8 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
             await run_in_threadpool(app.state.replay.stop)
         if scene is not None:
             await run_in_threadpool(scene.stop)
+        if cot is not None:
+            await run_in_threadpool(cot.stop)
         hub.bind(None)  # type: ignore[arg-type]
         store.close()
 
@@ -295,8 +314,9 @@ def create_app(
         except ValidationError as exc:  # a bad DEMTRACK_* variable or .env line, one line
             first = exc.errors()[0]
             name = ".".join(str(x) for x in first.get("loc", ())) or "settings"
+            msg = str(first.get("msg", "invalid")).removeprefix("Value error, ")
             raise SettingsError(
-                f"setting {name} (DEMTRACK_{name.upper()}): {first.get('msg', 'invalid')}"
+                f"setting {name} (DEMTRACK_{name.upper()}): {msg}"
                 + (f" (and {exc.error_count() - 1} more)" if exc.error_count() > 1 else "")
             ) from None
     _check(settings, scenarios)

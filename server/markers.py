@@ -2,7 +2,8 @@
 
 A marker is given either in the site frame (``e_m``, ``n_m`` and optionally ``u_m``: the
 DEM surface there when left out) or in WGS84 (``lat_deg``, ``lon_deg``, ``h_m`` above the
-ellipsoid); the other form, the MGRS reference (``mgrs`` package, 1 m precision) and the
+ellipsoid); the other form, the MGRS reference (``mgrs`` package, 1 m precision), the UTM
+coordinate (:func:`utm_text_of`) and the
 time as ISO 8601 UTC are worked out here, once, so every console and every export shows
 the same figures. Adding or removing one writes the row and its ``marker`` stream message
 in one transaction, under the pipeline's lock, so the stream stays in ``seq`` order.
@@ -17,6 +18,7 @@ from typing import Any
 import mgrs
 
 from demtrack.core.errors import NotFoundError, QueryError
+from demtrack.core.geo.grid_ref import grid_refs
 
 from .hub import StreamMessage
 from .site_info import elevation_at
@@ -30,6 +32,7 @@ __all__ = [
     "edit_marker",
     "markers_geojson",
     "mgrs_of",
+    "utm_text_of",
     "remove_marker",
     "stored_markers",
 ]
@@ -50,6 +53,16 @@ def mgrs_of(lat_deg: float, lon_deg: float) -> str:
         z = len(ref) - 13
         return f"{ref[: z + 1]} {ref[z + 1 : z + 3]} {ref[z + 3 : z + 8]} {ref[z + 8 :]}"
     return ref
+
+
+def utm_text_of(lat_deg: float, lon_deg: float) -> str | None:
+    """The UTM coordinate of a WGS84 point as GPS receivers show it; None at the poles.
+
+    ``17T 616941E 4468136N``: zone and band, easting and northing truncated to the metre
+    (:func:`demtrack.core.geo.grid_ref.utm_of`).
+    """
+    utm = grid_refs(lat_deg, lon_deg)["utm"]
+    return None if utm is None else str(utm["text"])
 
 
 def _iso(t_s: float) -> str:
@@ -115,6 +128,7 @@ def create_marker(state: ConsoleState, req: dict[str, Any]) -> dict[str, Any]:
         "lon_deg": lon,
         "h_m": h,
         "mgrs": mgrs_of(lat, lon),
+        "utm": utm_text_of(lat, lon),
         "source": dict(req.get("source") or {}),
     }
     with state.pipeline.commits.lock:

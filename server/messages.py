@@ -217,6 +217,11 @@ class MarkerBody(_Model):
     lon_deg: float
     h_m: float = Field(description="above the WGS84 ellipsoid (m)")
     mgrs: str = Field(description="MGRS grid reference, 1 m precision")
+    utm: str | None = Field(
+        default=None,
+        description="UTM zone, band, easting and northing (17T 616941E 4468136N); null at"
+        " the poles and for markers kept before it was recorded",
+    )
     source: dict[str, Any] = Field(description="where it came from (sensor, pixel, rule)")
 
 

@@ -13,6 +13,8 @@ from typing import Annotated, Any
 from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
+from .cot.target import parse_cot_url
+
 __all__ = ["Settings"]
 
 
@@ -105,6 +107,17 @@ class Settings(BaseSettings):
         default ``<site>/zones.geojson`` when that file exists.
     handoff_horizon_s, handoff_dt_s : float
         Hand-off prediction horizon and time step (0 horizon: no prediction).
+    cot_url : str or None
+        Send the live tracks and the markers as Cursor-on-Target events to a TAK peer:
+        ``udp://239.2.3.1:6969`` (multicast, ``?ttl=N`` and ``&iface=ADDR`` optional),
+        ``udp://host:port`` or ``tcp://takserver:8087``; unset for none.
+    cot_stale_s : float
+        A track's CoT event goes stale this long after its position's time (s).
+    cot_marker_stale_s : float
+        A marker's CoT event goes stale this long after it is sent (s).
+    cot_queue_size : int
+        Batches of stream messages the CoT sender buffers; beyond, they are dropped
+        (ingest never waits for the network).
     """
 
     model_config = SettingsConfigDict(
@@ -151,6 +164,10 @@ class Settings(BaseSettings):
     zones_path: Path | None = None
     handoff_horizon_s: float = Field(default=10.0, ge=0, le=120, allow_inf_nan=False)
     handoff_dt_s: float = Field(default=1.0, gt=0, le=10, allow_inf_nan=False)
+    cot_url: str | None = None
+    cot_stale_s: float = Field(default=60.0, gt=0, le=86_400, allow_inf_nan=False)
+    cot_marker_stale_s: float = Field(default=86_400.0, gt=0, le=31_536_000, allow_inf_nan=False)
+    cot_queue_size: int = Field(default=1000, gt=0, le=1_000_000)
 
     @field_validator("replay", mode="before")
     @classmethod
@@ -159,6 +176,18 @@ class Settings(BaseSettings):
         if isinstance(value, str):
             return [part.strip() for part in value.split(",") if part.strip()]
         return value
+
+    @field_validator("cot_url")
+    @classmethod
+    def _check_cot_url(cls, value: str | None) -> str | None:
+        """A URL the CoT sender can use (checked at start-up, not at the first event)."""
+        if value is None or not value.strip():
+            return None
+        try:
+            parse_cot_url(value)
+        except ValueError as exc:  # SettingsError is a ValueError: pydantic reports it
+            raise ValueError(str(exc)) from None
+        return value.strip()
 
     @property
     def resolved_db_path(self) -> Path:

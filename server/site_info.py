@@ -20,6 +20,7 @@ import numpy as np
 
 from demtrack.core.errors import GeoidError, NotFoundError, QueryError
 from demtrack.core.geo.geoid import GeoidModel, default_grid_dirs, find_grid
+from demtrack.core.geo.grid_ref import grid_refs
 from demtrack.core.site.orthophoto import read_orthophoto
 from demtrack.core.site.road_io import roads_to_geojson
 from demtrack.core.terrain.grid import GridSpec
@@ -212,7 +213,9 @@ def elevation_at(state: ConsoleState, e: float, n: float) -> dict[str, Any]:
     ``elevation_m``: its orthometric height ``h - N`` (None where ``u_m`` is), in the
     datum ``elevation_datum`` names (:func:`sea_level_geoid`: the site's own, e.g.
     ``"EGM96 geoid"``); ``undulation_m``: that ``N`` at the point (0 when the datum is the
-    ellipsoid). :class:`QueryError` for a point more than 10 000 km from the anchor or
+    ellipsoid); ``mgrs`` (1 m) and ``utm`` (``17T 629933E
+    4467728N``) of the point, None at the poles.
+    :class:`QueryError` for a point more than 10 000 km from the anchor or
     off the site's geoid grid.
     """
     if max(abs(e), abs(n)) > 1e7:
@@ -225,6 +228,7 @@ def elevation_at(state: ConsoleState, e: float, n: float) -> dict[str, Any]:
         big_h, datum, n_m = orthometric_in(geoid, float(lat), float(lon), float(h))
     except GeoidError as exc:
         raise QueryError(f"point ({e}, {n}): {exc}") from None
+    refs = grid_refs(float(lat), float(lon))
     return {
         "e_m": e,
         "n_m": n,
@@ -235,4 +239,7 @@ def elevation_at(state: ConsoleState, e: float, n: float) -> dict[str, Any]:
         "elevation_m": None if u is None else big_h,
         "elevation_datum": datum,
         "undulation_m": n_m,
+        # grid references of the point (None at the poles)
+        "mgrs": refs["mgrs"],
+        "utm": None if refs["utm"] is None else refs["utm"]["text"],
     }

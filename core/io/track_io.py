@@ -20,7 +20,8 @@ every file). A run of points between two gaps is its own segment in every format
 - CSV (here, :mod:`csv`): one row per point, columns :data:`TRACK_CSV_COLUMNS` with
   ``longitude``/``latitude`` that QGIS detects and GDAL reads with
   ``-oo X_POSSIBLE_NAMES=longitude -oo Y_POSSIBLE_NAMES=latitude``; :data:`TRACK_CSVT` is
-  the matching GDAL ``.csvt`` (column types).
+  the matching GDAL ``.csvt`` (column types); ``mgrs`` is each point's 1 m MGRS
+  reference (:func:`~demtrack.core.geo.grid_ref.mgrs_of`; empty at the poles).
 - GPX: :mod:`~demtrack.core.io.export_gpx` (gpxpy).
 - KML / KMZ: :mod:`~demtrack.core.io.export_kml` (``gx:Track``, ``absolute``).
 - GeoPackage: :mod:`~demtrack.core.io.export_gpkg` (GDAL through pyogrio, R-tree index).
@@ -41,6 +42,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from ..errors import TrackingError
+from ..geo.grid_ref import grid_refs
 from ..tracking.types import Track
 from .export_common import (
     UNIX_EPOCH,
@@ -94,6 +96,7 @@ TRACK_CSV_COLUMNS = (
     "h_wgs84_m",
     "elevation_m",
     "elevation_datum",
+    "mgrs",
     "e_m",
     "n_m",
     "u_m",
@@ -106,7 +109,7 @@ TRACK_CSV_COLUMNS = (
 #: GDAL's ``.csvt`` for :data:`TRACK_CSV_COLUMNS` (one type per column, in order).
 TRACK_CSVT = (
     '"Integer","String","Integer","DateTime","Real","Real","Real","Real","Real","String",'
-    '"Real","Real","Real","String","String","Real","Real","Real"\n'
+    '"String","Real","Real","Real","String","String","Real","Real","Real"\n'
 )
 _ELLIPSOID_NOTE = "h / h_wgs84_m / GeoJSON z are metres above the WGS84 ellipsoid"
 
@@ -278,7 +281,7 @@ def write_tracks_csv(
             for i, p in enumerate(track.points):
                 e, n_m, u = (float(v) for v in p.p_enu)
                 if xt is None:
-                    geo = ["", "", "", "", ""]
+                    geo = ["", "", "", "", "", ""]
                 else:
                     geo = [
                         repr(float(xt.lon_deg[i])),
@@ -286,6 +289,7 @@ def write_tracks_csv(
                         repr(float(xt.h_m[i])),
                         repr(float(xt.abs_h_m[i])) if hm.orthometric else "",
                         hm.datum_name if hm.orthometric else "",
+                        grid_refs(float(xt.lat_deg[i]), float(xt.lon_deg[i]))["mgrs"] or "",
                     ]
                 cov = (
                     ["", "", ""]

@@ -16,11 +16,13 @@ __all__ = ["print_geolocation", "register"]
 
 
 def _hit_line(tag: str, h: GroundHit) -> str:
+    from demtrack.core.geo.grid_ref import grid_refs
+
     e, n, u = h.p_enu
     return (
         f"  {tag:<8} E {e:9.3f}  N {n:9.3f}  U {u:7.3f} m | lat {h.lat_deg:.8f}"
         f"  lon {h.lon_deg:.8f}  h {h.h_m:8.3f} m | range {h.range_m:7.2f} m"
-        f" | sigma {h.sigma_m:5.2f} m"
+        f" | sigma {h.sigma_m:5.2f} m | MGRS {grid_refs(h.lat_deg, h.lon_deg)['mgrs'] or '-'}"
     )
 
 

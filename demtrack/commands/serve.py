@@ -164,6 +164,8 @@ def _run(args: argparse.Namespace) -> int:
         overrides.update(live)
     if args.scene3d:
         overrides.update(scene3d=True, viser_host=args.host, viser_port=args.viser_port)
+    if args.cot is not None:
+        overrides["cot_url"] = args.cot
     app = create_app(scenarios=SAMPLE_SCENARIOS, **overrides)  # --replay plays the sample's
     check_startup(app)  # a broken site or database: one line and exit 2, not a traceback
     settings = app.state.settings
@@ -212,6 +214,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         dest="scene3d",
         action="store_true",
         help="also serve the viser 3D scene (on --viser-port)",
+    )
+    p.add_argument(
+        "--cot",
+        default=None,
+        metavar="URL",
+        help="send tracks and markers as Cursor-on-Target to a TAK peer: udp://239.2.3.1:6969"
+        " (multicast; ?ttl=N), udp://HOST:PORT or tcp://HOST:8087 (default: $DEMTRACK_COT_URL)",
     )
     add_live_arguments(p, replay_default=[])
     p.add_argument(

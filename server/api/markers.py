@@ -135,6 +135,7 @@ _CSV_COLUMNS = (
     "n_m",
     "u_m",
     "mgrs",
+    "utm",
     "note",
 )
 
@@ -187,6 +188,8 @@ def export_markers(
     w.writerow(_CSV_COLUMNS)
     for m in markers.stored_markers(state):
         row = {**m, "longitude": m["lon_deg"], "latitude": m["lat_deg"]}
+        if row.get("utm") is None:  # kept before markers recorded it
+            row["utm"] = markers.utm_text_of(m["lat_deg"], m["lon_deg"]) or ""
         w.writerow([row[c] for c in _CSV_COLUMNS])
     return Response(
         buf.getvalue(),

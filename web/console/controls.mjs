@@ -64,15 +64,18 @@ function build3dLegend() {
   );
 }
 
-/** The cursor readout's text for an /api/site/elevation answer: the elevation in its
- * vertical datum (named), then the local frame's up. */
+/** The cursor readout's text for an /api/site/elevation answer: site frame, WGS84, the
+ * elevation in its vertical datum (named) and the local frame's up; under them (a second
+ * line: #readout keeps line breaks) the grid references, MGRS at 1 m and UTM
+ * zone/band/easting/northing. */
 export function readoutText(e, n, r) {
+  const grid = r.mgrs ? `\nMGRS ${r.mgrs} · UTM ${r.utm}` : "";
   const where = `E ${fmt(e, 1)} m  N ${fmt(n, 1)} m  │  ${fmt(r.lat_deg, 6)}°, ${fmt(r.lon_deg, 6)}°`;
-  if (r.u_m === null || r.u_m === undefined) return `${where}  │  off the DEM`;
+  if (r.u_m === null || r.u_m === undefined) return `${where}  │  off the DEM${grid}`;
   const elev = r.elevation_m !== undefined && r.elevation_m !== null
     ? `elevation ${fmt(r.elevation_m, 1)} m (${r.elevation_datum})`
     : `h ${fmt(r.h_m, 1)} m (WGS84 ellipsoid)`;
-  return `${where}  │  ${elev} · local up ${fmt(r.u_m, 1)} m`;
+  return `${where}  │  ${elev} · local up ${fmt(r.u_m, 1)} m${grid}`;
 }
 
 /** The cursor readout (site frame at once, then WGS84 and the DEM from the API; one

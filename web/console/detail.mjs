@@ -154,8 +154,9 @@ export function geoDetail(res, sensor, { rule, onRule, onKeep, onClose }) {
   );
 }
 
-/** A hit as two rows: site frame, range and σ, then its WGS84 position under them (one
- * row of eight columns does not fit the 400 px column: σ was cut off). */
+/** A hit as three rows: site frame, range and σ, then its WGS84 position and its grid
+ * references (MGRS, UTM) under them (one row of eight columns does not fit the 400 px
+ * column: σ was cut off). */
 function hitRow(name, h, isChosen) {
   return [
     el("tr", { class: isChosen ? "chosen" : "", "data-e": String(h.e_m), "data-n": String(h.n_m), "data-lat": String(h.lat_deg), "data-lon": String(h.lon_deg) },
@@ -164,5 +165,7 @@ function hitRow(name, h, isChosen) {
       el("td", { text: fmt(h.range_m, 1) }), el("td", { class: "sigma", text: fmt(h.sigma_m, 2) })),
     el("tr", { class: `latlon${isChosen ? " chosen-ll" : ""}` },
       el("td", { colspan: "6", text: `lat ${fmt(h.lat_deg, 7)}°  lon ${fmt(h.lon_deg, 7)}°` })),
+    h.mgrs ? el("tr", { class: `grid-ref${isChosen ? " chosen-ll" : ""}` },
+      el("td", { colspan: "6", "data-mgrs": "", title: `UTM ${h.utm.text}`, text: `MGRS ${h.mgrs}  ·  UTM ${h.utm.text}` })) : null,
   ];
 }

@@ -139,6 +139,7 @@ export function drawMarkers() {
   el("b", { text: m.name }),
   m.id < 0 ? el("span", { class: "muted", text: "saving…" }) : el("span", { class: "mono muted", text: `${fmtClock(m.t_s)} UTC` }),
   el("span", { class: "mono", "data-mgrs": "", text: m.mgrs }),
+  m.utm ? el("span", { class: "mono muted", "data-utm": "", text: `UTM ${m.utm}` }) : null,
   el("span", { class: "mono muted", text: `${fmt(m.lat_deg, 6)}°, ${fmt(m.lon_deg, 6)}° · E ${fmt(m.e_m, 1)} N ${fmt(m.n_m, 1)}` }),
   m.note ? el("span", { class: "muted", text: m.note }) : null,
   el("span", { class: "grow" }),
