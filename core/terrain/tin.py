@@ -154,9 +154,12 @@ def _needed_cells(grid: GridSpec, xy: np.ndarray) -> tuple[np.ndarray, np.ndarra
     surface).
     """
     import shapely
-    from scipy.spatial import ConvexHull
+    from scipy.spatial import ConvexHull, QhullError
 
-    hull_xy = xy[ConvexHull(xy).vertices]
+    try:
+        hull_xy = xy[ConvexHull(xy).vertices]
+    except QhullError:
+        raise DemError("the points are collinear or coincident: no TIN can be built") from None
     h = grid.cell_m * (1.0 + 1e-6)  # a centre exactly one cell away still counts
     shifts = np.array([[-h, -h], [-h, h], [h, -h], [h, h]])
     grown_xy = (hull_xy[:, None, :] + shifts[None]).reshape(-1, 2)

@@ -1,7 +1,7 @@
 """Terrain model from a lidar tile: 10 % of the ground points held out, RMSE at 1 m.
 
-No openly licensed LAS/LAZ sample is installed by any package in this environment
-(laspy's samples are not in its wheel), so the tile is synthetic but realistic: a UTM 17N
+The real, sparse tile (laspy's Autzen sample, fetched at test time) is in
+``test_autzen_tile.py``; this one is dense and synthetic, with known truth: a UTM 17N
 LAZ written through laspy, smooth terrain (slopes to ~0.15), 3 cm sensor noise on every
 return, ASPRS classes 2 (ground), 5 (trees: first returns in the crown, some last
 returns reaching the ground) and 6 (buildings: roofs, no ground beneath). It goes through
