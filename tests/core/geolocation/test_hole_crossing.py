@@ -32,8 +32,8 @@ def test_the_first_hole_cell_and_the_distance_along_the_ray():
 
 def test_slanted_ray_range_is_along_the_ray_not_horizontal():
     dem = flat_with_hole()
-    d = np.array([3.0, 0.0, -4.0])  # 5 m along the ray per 3 m east
-    hole = first_hole_crossing(dem, np.array([2.5, 29.5, 50.0]), d)
+    d = np.array([3.0, 0.0, 4.0])  # 5 m along the ray per 3 m east, rising from below
+    hole = first_hole_crossing(dem, np.array([2.5, 29.5, -40.0]), d)
     assert hole is not None
     assert hole.range_m == pytest.approx((29.5 - 2.5) * 5.0 / 3.0, abs=0.25 * 5.0 / 3.0)
 
