@@ -85,9 +85,7 @@ def cloud_crs(cloud: PointCloud, crs: Any = None, z_unit_m: float | None = None)
     k = z_unit_m_of(c) if z_unit_m is None else float(z_unit_m)
     if not (np.isfinite(k) and k > 0):
         raise CrsError(f"height unit must be a positive number of metres, got {z_unit_m}")
-    return CloudCrs(
-        c.to_wkt(), c.name, unit, 1.0 if h.is_geographic else factor, float(k)
-    )
+    return CloudCrs(c.to_wkt(), c.name, unit, 1.0 if h.is_geographic else factor, float(k))
 
 
 def select_surface(

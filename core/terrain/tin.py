@@ -106,9 +106,7 @@ class TinGrid:
     coverage: Coverage
 
 
-def tin_at(
-    xy_nodes: np.ndarray, z_nodes: np.ndarray, x: np.ndarray, y: np.ndarray
-) -> np.ndarray:
+def tin_at(xy_nodes: np.ndarray, z_nodes: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Barycentric interpolation in the Delaunay triangulation of ``xy_nodes``.
 
     Parameters

@@ -1,4 +1,4 @@
-"""``demtrack bench raycast|viewshed|server|pipeline|console-soak|lidar-holdout``: peers, console."""
+"""``demtrack bench raycast|viewshed|server|pipeline|console-soak|lidar-holdout``."""
 
 from __future__ import annotations
 

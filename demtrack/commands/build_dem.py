@@ -143,7 +143,6 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
-
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``build-dem`` command."""
     p = sub.add_parser("build-dem", help="grid laser points into a DEM GeoTIFF")
@@ -174,13 +173,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "h = H + N with --geoid-undulation N)",
     )
     p.add_argument("--geoid-undulation", type=float, metavar="N", help="N (m), --new-site")
-    p.add_argument(
-        "--z-unit", choices=("m", "ft", "ftUS"), help="height unit (default: the CRS's)"
-    )
+    p.add_argument("--z-unit", choices=("m", "ft", "ftUS"), help="height unit (default: the CRS's)")
     p.add_argument("--name", help="site name (--new-site; default the folder's name)")
-    p.add_argument(
-        "--cell", type=positive, help="cell size in m (default 0.5; 1 with --new-site)"
-    )
+    p.add_argument("--cell", type=positive, help="cell size in m (default 0.5; 1 with --new-site)")
     p.add_argument(
         "--fill",
         type=Path,

@@ -54,8 +54,16 @@ def test_a_surface_model_is_above_the_terrain_model(capsys, tmp_path, autzen_laz
     common = ("--vertical-datum", "ellipsoidal", "--cell", "2")
     assert run(capsys, "build-dem", autzen_laz, "--new-site", tmp_path / "t", *common)[0] == 0
     assert (
-        run(capsys, "build-dem", autzen_laz, "--new-site", tmp_path / "s", "--surface", "dsm",
-            *common)[0]  # fmt: skip
+        run(
+            capsys,
+            "build-dem",
+            autzen_laz,
+            "--new-site",
+            tmp_path / "s",
+            "--surface",
+            "dsm",
+            *common,
+        )[0]  # fmt: skip
         == 0
     )
     dtm, dsm = load_site(tmp_path / "t"), load_site(tmp_path / "s")

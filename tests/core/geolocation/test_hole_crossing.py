@@ -46,8 +46,7 @@ def test_no_hole_under_the_ray_or_ray_above_the_terrain():
     assert first_hole_crossing(dem, np.array([2.5, 29.5, 1.0]), np.array([1.0, 0, 0])) is None
     # stopped before it
     assert (
-        first_hole_crossing(dem, np.array([2.5, 29.5, -1.0]), np.array([1.0, 0, 0]), 20.0)
-        is None
+        first_hole_crossing(dem, np.array([2.5, 29.5, -1.0]), np.array([1.0, 0, 0]), 20.0) is None
     )
     full = Dem(dem.grid, np.zeros(dem.grid.shape, np.float32))
     assert first_hole_crossing(full, np.array([2.5, 29.5, -1.0]), np.array([1.0, 0, 0])) is None

@@ -37,9 +37,7 @@ def test_tin_at_is_scipys_delaunay_interpolator():
 
 
 @settings(max_examples=25, deadline=None)
-@given(
-    a=st.floats(-50, 50), b=st.floats(-2, 2), c=st.floats(-2, 2), seed=st.integers(0, 1000)
-)
+@given(a=st.floats(-50, 50), b=st.floats(-2, 2), c=st.floats(-2, 2), seed=st.integers(0, 1000))
 def test_tin_reproduces_any_plane(a, b, c, seed):
     pts = sparse(n=50, seed=seed, z=lambda x, y: a + b * x + c * y)
     q = np.random.default_rng(seed + 1).uniform(0, 60, (200, 2))
