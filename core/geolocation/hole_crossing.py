@@ -89,5 +89,5 @@ def first_hole_crossing(
                     best = (dist, rr, cc)
     if best is None:  # a NaN sample always has a NaN corner; kept for safety
         return None
-    e, n = g.from_grid(np.float64(best[2]), np.float64(best[1]))
+    e, n = g.from_grid(np.array(best[2], dtype=np.float64), np.array(best[1], dtype=np.float64))
     return HoleCrossing(float(e), float(n), float(r[k]))

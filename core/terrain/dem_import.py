@@ -517,7 +517,7 @@ def largest_data_rectangle(
     """
     from scipy.ndimage import binary_fill_holes
 
-    inside = binary_fill_holes(np.asarray(valid, dtype=bool))
+    inside = np.asarray(binary_fill_holes(np.asarray(valid, dtype=bool)), dtype=bool)
     if not inside.any():
         raise DemError("no cell has data")
     nrows, ncols = inside.shape
@@ -526,7 +526,9 @@ def largest_data_rectangle(
         return _largest_rectangle_exact(inside)
     pr, pc = -nrows % f, -ncols % f
     padded = np.pad(inside, ((0, pr), (0, pc)), constant_values=False)
-    blocks = padded.reshape(padded.shape[0] // f, f, padded.shape[1] // f, f).all(axis=(1, 3))
+    blocks = np.asarray(
+        padded.reshape(padded.shape[0] // f, f, padded.shape[1] // f, f).all(axis=(1, 3))
+    )
     if not blocks.any():
         return _largest_rectangle_exact(inside)
     b0, b1, d0, d1 = _largest_rectangle_exact(blocks)
