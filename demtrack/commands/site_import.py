@@ -117,12 +117,15 @@ def _run_import_dem(args: argparse.Namespace) -> int:
         full = run_import(box)
         # The warped footprint is not axis-aligned in the site frame: its bounding box
         # would leave hole strips along the edges. Keep the largest rectangle inside it.
-        r0, r1, c0, c1 = largest_data_rectangle(full.dem.count > 0)
+        r0, r1, c0, c1 = largest_data_rectangle(~full.dem.nodata)
         grid = sub_grid(box, r0, r1, c0, c1)
-        edge_pct = 100.0 * (1.0 - grid.nrows * grid.ncols / (box.nrows * box.ncols))
+        cut = box.nrows * box.ncols - grid.nrows * grid.ncols
         bounds_note = (
-            "the largest rectangle inside the warped footprint (its bounding box would "
-            f"add {edge_pct:.1f} % of cells, mostly edge holes)"
+            "the footprint's bounding box (no edge holes to cut)"
+            if cut == 0
+            else "the largest rectangle inside the warped footprint (the bounding box "
+            f"would add {cut:,} cells, {100 * cut / (box.nrows * box.ncols):.1f} %, along "
+            "the edges)"
         )
         result = crop_import(full, r0, r1, c0, c1)
     created = not root.exists()
