@@ -37,3 +37,55 @@ def _write_las(path, xyz, classes, returns, epsg=32617):
 def write_las():
     """``write_las(path, xyz, classes, returns, epsg=32617)``."""
     return _write_las
+
+
+# The real lidar tile: Autzen stadium (Eugene, Oregon), shipped in laspy's source
+# distribution on the package registry. Fetched at test time into a cache outside the
+# repository (never committed): DEMTRACK_TEST_DATA, else ~/.cache/demtrack-test-data.
+LASPY_SDIST = "laspy==2.7.0"
+AUTZEN_MEMBER = "laspy-2.7.0/tests/data/autzen_trim.laz"
+AUTZEN_SHA256 = "75867b3e75cfc3c2e96da9f753c04c9fbaa6a59468dea13e2859f3109b38bd66"
+
+
+def fetch_autzen() -> Path:
+    """Path of ``autzen_trim.laz``, downloaded with the system ``pip download`` once."""
+    import hashlib
+    import os
+    import shutil
+    import subprocess
+    import tarfile
+    import tempfile
+
+    cache = Path(
+        os.environ.get("DEMTRACK_TEST_DATA") or Path.home() / ".cache" / "demtrack-test-data"
+    )
+    target = cache / "autzen_trim.laz"
+
+    def good(p: Path) -> bool:
+        return p.is_file() and hashlib.sha256(p.read_bytes()).hexdigest() == AUTZEN_SHA256
+
+    if good(target):
+        return target
+    pip = shutil.which("pip") or shutil.which("pip3")
+    cmd = [pip or "pip", "download", "--no-deps", "--no-binary", ":all:", LASPY_SDIST]
+    cache.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=cache) as tmp:
+        done = subprocess.run([*cmd, "-d", tmp], capture_output=True, text=True, timeout=300)
+        sdists = list(Path(tmp).glob("laspy-*.tar.gz"))
+        if done.returncode != 0 or not sdists:
+            pytest.fail(f"cannot fetch the Autzen tile: `{' '.join(cmd)}` failed: {done.stderr}")
+        with tarfile.open(sdists[0]) as tar:
+            member = tar.extractfile(AUTZEN_MEMBER)
+            assert member is not None
+            part = cache / "autzen_trim.laz.part"
+            part.write_bytes(member.read())
+        if not good(part):
+            pytest.fail(f"{AUTZEN_MEMBER} in {sdists[0].name} does not have the expected sha256")
+        part.replace(target)
+    return target
+
+
+@pytest.fixture(scope="session")
+def autzen_laz() -> Path:
+    """The real Autzen lidar tile (LAZ, Oregon state plane, international feet)."""
+    return fetch_autzen()

@@ -34,15 +34,20 @@ from ..geo.geoid import GeoidModel, as_geoid
 from .grid import GridSpec
 
 __all__ = [
+    "RESAMPLING_METHODS",
     "bilinear_at_centres",
     "image_to_rgba",
     "local_crs_wkt",
     "points_to_local",
     "read_raster_to_local",
+    "resample_at_centres",
     "source_window",
     "unit_m_from_tag",
     "warp_to_local",
 ]
+
+#: How a source raster is sampled at a target cell (see :func:`resample_at_centres`).
+RESAMPLING_METHODS = ("bilinear", "cubic", "nearest", "average")
 
 _CHUNK_CELLS = 262_144  # cells per batch: bounds the temporaries to a few tens of MB
 _HULL_TOL_PX = 1e-6  # round-off allowance at the hull of source cell centres
@@ -102,6 +107,84 @@ def bilinear_at_centres(
     return out[0] if values.ndim == 2 else out
 
 
+def _keys_cubic(t: np.ndarray) -> np.ndarray:
+    """Keys' cubic convolution kernel (a = -0.5, GDAL's "cubic") at offsets ``t``."""
+    a = -0.5
+    t = np.abs(t)
+    return np.where(
+        t <= 1.0,
+        (a + 2.0) * t**3 - (a + 3.0) * t**2 + 1.0,
+        np.where(t < 2.0, a * t**3 - 5.0 * a * t**2 + 8.0 * a * t - 4.0 * a, 0.0),
+    )
+
+
+def resample_at_centres(
+    values: np.ndarray,
+    transform: Affine,
+    x: np.ndarray,
+    y: np.ndarray,
+    method: str = "bilinear",
+) -> np.ndarray:
+    """Sample cell-centre values at points ``(x, y)`` by a stated method.
+
+    Parameters
+    ----------
+    values, transform, x, y
+        As :func:`bilinear_at_centres`.
+    method : {"bilinear", "cubic", "nearest", "average"}
+        ``bilinear``: :func:`bilinear_at_centres`. ``cubic``: Keys' cubic convolution
+        (a = -0.5, GDAL's "cubic") over the 4 x 4 centres around the point, edge centres
+        repeated beyond the raster; interpolating (it passes through the centre values)
+        and exact on quadratic surfaces. ``nearest``: the value of the cell containing the
+        point (defined over the whole raster, not only the hull of centres).
+        ``average`` samples bilinearly here; :func:`warp_to_local` averages over the
+        target cell.
+
+    Returns
+    -------
+    ndarray
+        NaN outside the domain or where a value the method uses is NaN.
+    """
+    if method in ("bilinear", "average"):
+        return bilinear_at_centres(values, transform, x, y)
+    if method not in RESAMPLING_METHODS:
+        raise DemError(f"resampling must be one of {', '.join(RESAMPLING_METHODS)}; got {method!r}")
+    v = values[None] if values.ndim == 2 else values
+    nb, nr, nc = v.shape
+    col_c, row_c = ~transform @ (np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64))
+    col_c, row_c = np.asarray(col_c), np.asarray(row_c)
+    out = np.empty((nb,) + col_c.shape, dtype=np.float64)
+    if method == "nearest":
+        inside = (col_c >= 0) & (col_c < nc) & (row_c >= 0) & (row_c < nr)
+        c = np.clip(np.floor(np.where(inside, col_c, 0.0)).astype(np.int64), 0, nc - 1)
+        r = np.clip(np.floor(np.where(inside, row_c, 0.0)).astype(np.int64), 0, nr - 1)
+        for b in range(nb):
+            out[b] = np.where(inside, v[b][r, c], np.nan)
+        return out[0] if values.ndim == 2 else out
+    gx, gy = col_c - 0.5, row_c - 0.5
+    inside = (
+        (gx >= -_HULL_TOL_PX)
+        & (gx <= nc - 1 + _HULL_TOL_PX)
+        & (gy >= -_HULL_TOL_PX)
+        & (gy <= nr - 1 + _HULL_TOL_PX)
+    )
+    gx = np.clip(np.where(inside, gx, 0.0), 0.0, nc - 1)
+    gy = np.clip(np.where(inside, gy, 0.0), 0.0, nr - 1)
+    c1 = np.floor(gx).astype(np.int64)
+    r1 = np.floor(gy).astype(np.int64)
+    fx, fy = gx - c1, gy - r1
+    for b in range(nb):
+        acc = np.zeros(gx.shape)
+        for i in range(-1, 3):
+            wy = _keys_cubic(fy - i)
+            rr = np.clip(r1 + i, 0, nr - 1)
+            for j in range(-1, 3):
+                cc = np.clip(c1 + j, 0, nc - 1)
+                acc = acc + wy * _keys_cubic(fx - j) * v[b][rr, cc]
+        out[b] = np.where(inside, acc, np.nan)
+    return out[0] if values.ndim == 2 else out
+
+
 def _as_float_source(src_array: Any, src_nodata: float | None) -> np.ndarray:
     if isinstance(src_array, np.ma.MaskedArray):
         data = np.ma.getdata(src_array).astype(np.float64)
@@ -132,6 +215,7 @@ def warp_to_local(
     z_local: Any = 0.0,
     max_iter: int = 6,
     tol_m: float = 1e-6,
+    resampling: str = "bilinear",
 ) -> np.ndarray:
     """Resample a georeferenced raster onto a grid of the local frame.
 
@@ -166,6 +250,12 @@ def warp_to_local(
         (1.6 cm for 100 m of relief at 1 km): negligible for an orthophoto.
     max_iter, tol_m : int, float
         Elevations only: height iteration limit and convergence threshold (m).
+    resampling : {"bilinear", "cubic", "nearest", "average"}
+        Elevations only: how the source is sampled (:func:`resample_at_centres`).
+        ``average``: the mean of ``k x k`` bilinear samples spread evenly over the target
+        cell (``k`` = target cell / source pixel, rounded up), at the height the centre
+        solved for; NaN if any is NaN. For downsampling (a target cell larger than the
+        source's pixels).
 
     Returns
     -------
@@ -191,6 +281,10 @@ def warp_to_local(
     """
     if kind not in ("elevation", "image"):
         raise DemError(f"kind must be 'elevation' or 'image'; got {kind!r}")
+    if resampling not in RESAMPLING_METHODS:
+        raise DemError(
+            f"resampling must be one of {', '.join(RESAMPLING_METHODS)}; got {resampling!r}"
+        )
     if not isinstance(frame, LocalFrame):
         raise CrsError("frame must be a LocalFrame")
     if not isinstance(grid, GridSpec):
@@ -237,7 +331,11 @@ def warp_to_local(
             vals = bilinear_at_centres(src, transform, np.asarray(x), np.asarray(y))
             out[:, sl] = vals if vals.ndim == 3 else vals[None]
             continue
-        u, ok = _solve_heights(src, transform, project, frame, e, n, k, n_geoid, max_iter, tol_m)
+        u, ok = _solve_heights(
+            src, transform, project, frame, e, n, k, n_geoid, max_iter, tol_m, resampling
+        )
+        if resampling == "average":
+            u, ok = _average_heights(src, transform, project, frame, grid, e, n, u, ok, k, n_geoid)
         out[sl] = np.where(ok, u, np.nan)
     return out if kind == "elevation" or src.ndim == 3 else out[0]
 
@@ -273,6 +371,7 @@ def _solve_heights(
     n_geoid: GeoidModel,
     max_iter: int,
     tol_m: float,
+    resampling: str = "bilinear",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Fixed-point iteration along each cell's local vertical; see :func:`warp_to_local`."""
     up0 = frame.R_enu_ecef[2]
@@ -281,7 +380,9 @@ def _solve_heights(
     for _ in range(max(1, int(max_iter))):
         lat, lon, h = frame.to_geodetic(e, n, u)
         x, y = project(lon, lat)
-        h_src = bilinear_at_centres(src, transform, x, y) * k + n_geoid.undulation_m(lat, lon)
+        h_src = resample_at_centres(src, transform, x, y, resampling) * k + n_geoid.undulation_m(
+            lat, lon
+        )
         ok = np.isfinite(h_src)
         phi, lam = np.radians(lat), np.radians(lon)
         # cos of the angle between the frame's up and the ellipsoid normal at the point:
@@ -296,6 +397,42 @@ def _solve_heights(
         if not np.any(np.abs(du) > tol_m):
             break
     return u, ok
+
+
+def _average_heights(
+    src: np.ndarray,
+    transform: Affine,
+    project: Any,
+    frame: LocalFrame,
+    grid: GridSpec,
+    e: np.ndarray,
+    n: np.ndarray,
+    u: np.ndarray,
+    ok: np.ndarray,
+    k: float,
+    n_geoid: GeoidModel,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Mean source height over each target cell (``resampling="average"``)."""
+    # Source pixels per metre along E at the chunk's middle: sets the sub-sample count.
+    e_mid, n_mid = float(np.mean(e)), float(np.mean(n))
+    lat, lon, _ = frame.to_geodetic(np.array([e_mid, e_mid + 1.0]), np.array([n_mid, n_mid]), 0.0)
+    x, y = project(lon, lat)
+    col, row = ~transform @ (x, y)
+    px_per_m = float(np.hypot(col[1] - col[0], row[1] - row[0]))
+    m = max(1, int(np.ceil(grid.cell_m * px_per_m - 1e-9)))
+    offs = ((np.arange(m) + 0.5) / m - 0.5) * grid.cell_m
+    total = np.zeros_like(u)
+    good = ok.copy()
+    u0 = np.where(ok, u, 0.0)
+    for de in offs:
+        for dn in offs:
+            lat, lon, h = frame.to_geodetic(e + de, n + dn, u0)
+            x, y = project(lon, lat)
+            h_src = bilinear_at_centres(src, transform, x, y) * k + n_geoid.undulation_m(lat, lon)
+            good &= np.isfinite(h_src)
+            # the sample's height above the local vertical's point, as local Z
+            total = total + np.where(np.isfinite(h_src), u0 + (h_src - h), 0.0)
+    return total / (m * m), good
 
 
 def points_to_local(

@@ -40,14 +40,18 @@ __all__ = [
     "DemImport",
     "RasterInfo",
     "footprint_bounds_local",
+    "crop_import",
     "grid_over",
     "import_dem",
+    "largest_data_rectangle",
     "native_cell_m",
     "raster_outline_lonlat",
     "read_raster_info",
+    "sub_grid",
     "suggest_frame",
 ]
 
+_RECT_EXACT_SIDE = 256  # largest_data_rectangle: exact search up to this many cells a side
 _LATTICE_TOL_PX = 1e-6  # tiles whose origins differ by a whole number of pixels to this
 
 
@@ -337,6 +341,8 @@ class DemImport:
         Cells left without data.
     groups : tuple of tuple of int
         Tiles merged into one source raster (same CRS and pixel lattice).
+    source : ndarray, int32, shape (nrows, ncols), or None
+        Index of the tile that supplied each cell (-1: none).
     """
 
     dem: Dem
@@ -344,6 +350,7 @@ class DemImport:
     filled_cells: int
     hole_cells: int
     groups: tuple[tuple[int, ...], ...]
+    source: np.ndarray | None = None
 
 
 def import_dem(
@@ -357,6 +364,7 @@ def import_dem(
     sigma_m: float = 0.0,
     coarse_sigma_m: float = 1.0,
     crs_wkt: str | None = None,
+    resampling: str = "bilinear",
 ) -> DemImport:
     """Warp and mosaic DEM tiles (any CRS) onto ``grid``, then fill holes from ``coarse``.
 
@@ -382,6 +390,10 @@ def import_dem(
         cells' variance so that geolocation uncertainty includes it.
     crs_wkt : str, optional
         CRS stored with the DEM (normally :func:`~demtrack.core.terrain.crs_import.local_crs_wkt`).
+    resampling : {"bilinear", "cubic", "nearest", "average"}
+        How the tiles are sampled at the site's cells
+        (:func:`~demtrack.core.terrain.crs_import.warp_to_local`); the coarse DEM is always
+        bilinear.
 
     Returns
     -------
@@ -418,6 +430,7 @@ def import_dem(
             grid,
             geoid_undulation_m=geoid_undulation_m,
             z_unit_m=k_m,
+            resampling=resampling,
         )
         # Which tile supplied a cell: the owner of the source cell nearest its centre.
         who = warp_to_local(
@@ -457,6 +470,122 @@ def import_dem(
         int(filled.sum()),
         int(np.isnan(elev).sum()),
         tuple(tuple(g) for g in groups),
+        source,
+    )
+
+
+def _largest_rectangle_exact(inside: np.ndarray) -> tuple[int, int, int, int]:
+    """Histogram-and-stack maximal rectangle of True cells, O(nrows * ncols) steps."""
+    nrows, ncols = inside.shape
+    heights = np.zeros(ncols + 1, dtype=np.int64)  # a 0 sentinel closes every run
+    best = (0, 0, 0, 0, 0)
+    for r in range(nrows):
+        heights[:ncols] = np.where(inside[r], heights[:ncols] + 1, 0)
+        stack: list[int] = []
+        for c in range(ncols + 1):
+            while stack and heights[stack[-1]] >= heights[c]:
+                h = int(heights[stack.pop()])
+                left = stack[-1] + 1 if stack else 0
+                area = h * (c - left)
+                if area > best[0]:
+                    best = (area, r - h + 1, r + 1, left, c)
+            stack.append(c)
+    return best[1], best[2], best[3], best[4]
+
+
+def largest_data_rectangle(
+    valid: np.ndarray, exact_side: int = _RECT_EXACT_SIDE
+) -> tuple[int, int, int, int]:
+    """The largest axis-aligned rectangle of cells inside the data's footprint.
+
+    Parameters
+    ----------
+    valid : ndarray, bool, shape (nrows, ncols)
+        Cells with data. Gaps enclosed by data (a lake, a void) count as inside: they do
+        not shrink the rectangle, only the footprint's outline does.
+    exact_side : int
+        Grids up to this many cells a side are searched exactly (the classic
+        histogram-and-stack method). Larger ones are searched on blocks of cells (a
+        block counts only when all its cells are inside), then each side of the found
+        rectangle is pushed out cell by cell while the new row or column is all inside:
+        within a block's width of the largest rectangle, and always inside.
+
+    Returns
+    -------
+    (r0, r1, c0, c1) : int
+        Rows ``r0:r1`` and columns ``c0:c1`` (exclusive ends).
+
+    Raises
+    ------
+    DemError
+        If no cell has data.
+    """
+    from scipy.ndimage import binary_fill_holes
+
+    inside = np.asarray(binary_fill_holes(np.asarray(valid, dtype=bool)), dtype=bool)
+    if not inside.any():
+        raise DemError("no cell has data")
+    nrows, ncols = inside.shape
+    f = int(np.ceil(max(nrows, ncols) / exact_side))
+    if f <= 1:
+        return _largest_rectangle_exact(inside)
+    pr, pc = -nrows % f, -ncols % f
+    padded = np.pad(inside, ((0, pr), (0, pc)), constant_values=False)
+    blocks = np.asarray(
+        padded.reshape(padded.shape[0] // f, f, padded.shape[1] // f, f).all(axis=(1, 3))
+    )
+    if not blocks.any():
+        return _largest_rectangle_exact(inside)
+    b0, b1, d0, d1 = _largest_rectangle_exact(blocks)
+    r0, r1, c0, c1 = b0 * f, min(b1 * f, nrows), d0 * f, min(d1 * f, ncols)
+    grown = True
+    while grown:
+        grown = False
+        if r0 > 0 and inside[r0 - 1, c0:c1].all():
+            r0, grown = r0 - 1, True
+        if r1 < nrows and inside[r1, c0:c1].all():
+            r1, grown = r1 + 1, True
+        if c0 > 0 and inside[r0:r1, c0 - 1].all():
+            c0, grown = c0 - 1, True
+        if c1 < ncols and inside[r0:r1, c1].all():
+            c1, grown = c1 + 1, True
+    return r0, r1, c0, c1
+
+
+def sub_grid(grid: GridSpec, r0: int, r1: int, c0: int, c1: int) -> GridSpec:
+    """Rows ``r0:r1`` and columns ``c0:c1`` of ``grid`` as a grid of their own."""
+    return GridSpec(
+        grid.x_min + c0 * grid.cell_m, grid.y_max - r0 * grid.cell_m, grid.cell_m, r1 - r0, c1 - c0
+    )
+
+
+def crop_import(result: DemImport, r0: int, r1: int, c0: int, c1: int) -> DemImport:
+    """The import cut to rows ``r0:r1``, columns ``c0:c1`` (the same cells, not re-warped).
+
+    Tile counts are recounted from the cropped cells' sources.
+    """
+    sl = (slice(r0, r1), slice(c0, c1))
+    d = result.dem
+    dem = Dem(
+        sub_grid(d.grid, r0, r1, c0, c1),
+        d.elevation[sl],
+        d.variance[sl],
+        d.count[sl],
+        d.filled[sl],
+        d.crs_wkt,
+        d.vertical_datum,
+    )
+    full = result.source
+    if full is None:
+        full = np.where(result.dem.count > 0, 0, -1).astype(np.int32)
+    src = full[sl]
+    return DemImport(
+        dem,
+        tuple(int(np.count_nonzero(src == k)) for k in range(len(result.tile_cells))),
+        int(dem.filled.sum()),
+        int(dem.nodata.sum()),
+        result.groups,
+        src,
     )
 
 

@@ -1,4 +1,4 @@
-"""``demtrack bench raycast|viewshed|server|pipeline|console-soak``: peers, server, console."""
+"""``demtrack bench raycast|viewshed|server|pipeline|console-soak|lidar-holdout``."""
 
 from __future__ import annotations
 
@@ -8,13 +8,14 @@ __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
-    from demtrack.bench import pipeline_replay, raycast, server_bench, viewshed
+    from demtrack.bench import lidar_holdout, pipeline_replay, raycast, server_bench, viewshed
 
     jobs = {
         "raycast": raycast.main,
         "viewshed": viewshed.main,
         "server": server_bench.main,
         "pipeline": pipeline_replay.main,
+        "lidar-holdout": lidar_holdout.main,
     }
     if args.bench == "console-soak":  # Playwright is imported only for this one
         from demtrack.bench import console_soak
@@ -44,6 +45,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         add_help=False,
     )
     pl.set_defaults(func=_run)
+    lh = bsub.add_parser(
+        "lidar-holdout",
+        help="a sparse real lidar tile at 1 m, 10 %% held out: TIN grid vs scipy's TIN",
+        add_help=False,
+    )
+    lh.set_defaults(func=_run)
     c = bsub.add_parser(
         "console-soak",
         help="the console in Chromium over a long replay at 10x with about 20 tracks",

@@ -1,4 +1,10 @@
-"""``demtrack build-dem``: grid a laser point cloud into a DEM GeoTIFF (Collins et al.)."""
+"""``demtrack build-dem``: grid a laser point cloud into a DEM GeoTIFF (Collins et al.).
+
+With ``--new-site DIR`` it creates a site from the cloud alone (any CRS, any unit): the
+frame is anchored at the cloud's centre on the ground, the DEM gridded in it (per-cell
+statistics, a TIN between the points), and the folder written beside DIR first, then
+renamed, so a refused input leaves nothing behind.
+"""
 
 from __future__ import annotations
 
@@ -24,6 +30,16 @@ def _source_vertical_datum(crs: object) -> str:
 def _run(args: argparse.Namespace) -> int:
     import numpy as np
 
+    if args.new_site is not None:
+        from .build_site import run_new_site
+
+        return run_new_site(args)
+    if args.output is None:
+        raise InputFileError("give -o DEM.tif, or --new-site DIR to create a site")
+    for flag in ("vertical_datum", "geoid_undulation", "z_unit", "name"):
+        if getattr(args, flag) is not None:
+            raise InputFileError(f"--{flag.replace('_', '-')} is for --new-site")
+
     from demtrack.core.geo.geodesy import as_crs
     from demtrack.core.site.folder import load_site
     from demtrack.core.site.update import write_dem_atomic
@@ -36,9 +52,13 @@ def _run(args: argparse.Namespace) -> int:
     from demtrack.core.terrain.pointcloud import read_point_cloud
 
     require_suffix(args.output, (".tif", ".tiff"), "--output")
-    cloud = read_point_cloud(args.points).select(
-        ground_only=args.ground_only, first_returns=args.first_returns
-    )
+    cell = 0.5 if args.cell is None else args.cell
+    cloud = read_point_cloud(args.points)
+    if args.surface is not None:
+        from demtrack.core.terrain.cloud_site import select_surface
+
+        cloud = select_surface(cloud, args.surface, str(args.points))
+    cloud = cloud.select(ground_only=args.ground_only, first_returns=args.first_returns)
     if len(cloud) == 0:
         raise InputFileError(f"{args.points}: no points left after the class/return selection")
     pts = cloud.xyz
@@ -67,7 +87,7 @@ def _run(args: argparse.Namespace) -> int:
         if not crs.is_projected or unit not in ("metre", "meter"):
             raise CrsError(
                 f"the points' CRS {crs.name!r} is not projected in metres; grid them in a "
-                "site frame with --site DIR instead"
+                "site frame with --site DIR, or make a new site with --new-site DIR"
             )
         crs_wkt = crs.to_wkt()
         vertical_datum = _source_vertical_datum(crs)
@@ -76,7 +96,20 @@ def _run(args: argparse.Namespace) -> int:
             "the points' CRS is missing: pass --site DIR (points in the site frame, "
             "or with --crs converted into it) or --crs EPSG:XXXX"
         )
-    dem = Dem.from_points(pts, args.cell, bounds=bounds, crs_wkt=crs_wkt)
+    if args.interpolate == "tin":
+        from demtrack.core.terrain.tin import grid_points_tin
+
+        dsm = args.surface == "dsm"
+        dem = grid_points_tin(
+            pts,
+            cell,
+            bounds=bounds,
+            crs_wkt=crs_wkt,
+            statistic="max" if dsm else "mean",
+            method="sample" if dsm else "fit",
+        ).dem
+    else:
+        dem = Dem.from_points(pts, cell, bounds=bounds, crs_wkt=crs_wkt)
     if args.site is None:
         # Heights stay those of the points: say so instead of claiming the site's datum.
         dem = dataclasses.replace(dem, vertical_datum=vertical_datum)
@@ -98,6 +131,14 @@ def _run(args: argparse.Namespace) -> int:
     args.output.parent.mkdir(parents=True, exist_ok=True)
     write_dem_atomic(args.output, dem)  # a failed write leaves no partial file
     g = dem.grid
+    if args.interpolate == "tin":
+        from demtrack.core.terrain.tin import Coverage
+
+        print(
+            f"{args.output}: {g.ncols}x{g.nrows} cells of {g.cell_m} m from {len(pts):,} "
+            f"points; {Coverage.of(dem).describe()}"
+        )
+        return 0
     print(
         f"{args.output}: {g.ncols}x{g.nrows} cells of {g.cell_m} m from {len(pts):,} points; "
         f"{100 * dem.coverage:.1f} % of cells hold points, {holes:,} holes"
@@ -110,8 +151,35 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``build-dem`` command."""
     p = sub.add_parser("build-dem", help="grid laser points into a DEM GeoTIFF")
     p.add_argument("points", type=Path, help="points: .las/.laz, .npy (n x 3) or .csv x,y,z")
-    p.add_argument("-o", "--output", type=Path, required=True, metavar="DEM.tif")
-    p.add_argument("--cell", type=positive, default=0.5, help="cell size in m (default 0.5)")
+    p.add_argument("-o", "--output", type=Path, metavar="DEM.tif")
+    p.add_argument(
+        "--new-site",
+        type=Path,
+        metavar="DIR",
+        help="create a site from the points alone (frame anchored at the cloud's centre)",
+    )
+    p.add_argument(
+        "--surface",
+        choices=("dtm", "dsm"),
+        help="dtm: ground points (class 2), cell mean; dsm: first returns, highest per "
+        "cell (default: dtm for --new-site, else every point)",
+    )
+    p.add_argument(
+        "--interpolate",
+        choices=("tin", "none"),
+        help="tin: a TIN between the points (default for --new-site); none: the cells "
+        "with points only, the rest holes (default otherwise)",
+    )
+    p.add_argument(
+        "--vertical-datum",
+        choices=("ellipsoidal", "orthometric"),
+        help="--new-site: what the points' heights are measured from (orthometric: "
+        "h = H + N with --geoid-undulation N)",
+    )
+    p.add_argument("--geoid-undulation", type=float, metavar="N", help="N (m), --new-site")
+    p.add_argument("--z-unit", choices=("m", "ft", "ftUS"), help="height unit (default: the CRS's)")
+    p.add_argument("--name", help="site name (--new-site; default the folder's name)")
+    p.add_argument("--cell", type=positive, help="cell size in m (default 0.5; 1 with --new-site)")
     p.add_argument(
         "--fill",
         type=Path,

@@ -11,6 +11,7 @@ from .common import add_site_argument, any_number, positive
 
 if TYPE_CHECKING:
     from demtrack.core.geolocation.geolocate import Geolocation, GroundHit
+    from demtrack.core.terrain.dem import Dem
 
 __all__ = ["print_geolocation", "register"]
 
@@ -26,9 +27,23 @@ def _hit_line(tag: str, h: GroundHit) -> str:
     )
 
 
-def print_geolocation(g: Geolocation) -> None:
-    """Human-readable answer: the selected hits, then every hit and the road point."""
-    note = " (the ray crossed a DEM hole; a crossing may be missing)" if g.crossed_nodata else ""
+def hole_note(g: Geolocation, dem: Dem | None) -> str:
+    """The DEM-hole warning: where the first hole under the ray is, when the DEM is given."""
+    if not g.crossed_nodata:
+        return ""
+    from demtrack.core.geolocation.hole_crossing import first_hole_crossing
+
+    hole = first_hole_crossing(dem, g.origin_enu, g.direction_enu) if dem is not None else None
+    where = f" {hole.describe()}" if hole is not None else ""
+    return f" (the ray crossed a DEM hole{where}; a crossing may be missing)"
+
+
+def print_geolocation(g: Geolocation, dem: Dem | None = None) -> None:
+    """Human-readable answer: the selected hits, then every hit and the road point.
+
+    With ``dem`` (the site's), the DEM-hole warning says where the hole is.
+    """
+    note = hole_note(g, dem)
     print(f"  status {g.status}, {len(g.hits)} terrain hit(s), rule {g.rule!r}{note}")
     chosen = {id(h) for h in g.selected}
     for k, h in enumerate(g.hits):
@@ -52,7 +67,7 @@ def _run(args: argparse.Namespace) -> int:
         print(json.dumps(geolocation_to_dict(sensor.id, g), indent=2))
     else:
         print(f"{sensor.id} ({sensor.name}) pixel ({g.u:g}, {g.v:g}); * = selected")
-        print_geolocation(g)
+        print_geolocation(g, site.dem)
     return 0
 
 

@@ -20,11 +20,14 @@ from .common import finite, non_negative, positive, positive_int
 if TYPE_CHECKING:
     from demtrack.core.camera.pinhole import Intrinsics
     from demtrack.core.geo.geoid import GeoidModel
+    from demtrack.core.terrain.dem_import import DemImport
 
 __all__ = ["register"]
 
 _Z_UNITS = {"m": 1.0, "ft": 0.3048, "ftUS": 1200.0 / 3937.0}
 _MAX_ORTHO_SIDE = 8192
+# core.terrain.crs_import.RESAMPLING_METHODS, without importing the engine at start-up
+_RESAMPLING = ("bilinear", "cubic", "nearest", "average")
 
 
 def _geoid(
@@ -106,11 +109,14 @@ def _run_import_dem(args: argparse.Namespace) -> int:
     )
     from demtrack.core.terrain.crs_import import local_crs_wkt
     from demtrack.core.terrain.dem_import import (
+        crop_import,
         footprint_bounds_local,
         grid_over,
         import_dem,
+        largest_data_rectangle,
         native_cell_m,
         read_raster_info,
+        sub_grid,
         suggest_frame,
     )
     from demtrack.core.terrain.grid import GridSpec
@@ -138,23 +144,47 @@ def _run_import_dem(args: argparse.Namespace) -> int:
     old_grid = None
     if doc is not None and args.cell is None and args.bounds is None:
         old_grid = load_site(root).dem.grid
+
+    def run_import(grid: GridSpec) -> DemImport:
+        return import_dem(
+            args.tiles,
+            frame,
+            grid,
+            coarse=args.coarse,
+            geoid_undulation_m=n_used,
+            z_unit_m=z_unit,
+            sigma_m=args.sigma,
+            coarse_sigma_m=args.coarse_sigma,
+            crs_wkt=local_crs_wkt(frame),
+            resampling=args.resampling,
+        )
+
     if old_grid is not None:
         grid = old_grid
+        bounds_note = "the site's existing grid"
+        result = run_import(grid)
+    elif args.bounds:
+        cell = args.cell or round(min(native_cell_m(i, frame) for i in infos), 3)
+        grid = GridSpec.covering(*args.bounds, cell)
+        bounds_note = "--bounds as given"
+        result = run_import(grid)
     else:
         cell = args.cell or round(min(native_cell_m(i, frame) for i in infos), 3)
-        bounds = tuple(args.bounds) if args.bounds else footprint_bounds_local(infos, frame)
-        grid = GridSpec.covering(*bounds, cell) if args.bounds else grid_over(bounds, cell)
-    result = import_dem(
-        args.tiles,
-        frame,
-        grid,
-        coarse=args.coarse,
-        geoid_undulation_m=n_used,
-        z_unit_m=z_unit,
-        sigma_m=args.sigma,
-        coarse_sigma_m=args.coarse_sigma,
-        crs_wkt=local_crs_wkt(frame),
-    )
+        box = grid_over(footprint_bounds_local(infos, frame), cell)
+        full = run_import(box)
+        # The warped footprint is not axis-aligned in the site frame: its bounding box
+        # would leave hole strips along the edges. Keep the largest rectangle inside it.
+        r0, r1, c0, c1 = largest_data_rectangle(~full.dem.nodata)
+        grid = sub_grid(box, r0, r1, c0, c1)
+        cut = box.nrows * box.ncols - grid.nrows * grid.ncols
+        bounds_note = (
+            "the footprint's bounding box (no edge holes to cut)"
+            if cut == 0
+            else "the largest rectangle inside the warped footprint (the bounding box "
+            f"would add {cut:,} cells, {100 * cut / (box.nrows * box.ncols):.1f} %, along "
+            "the edges)"
+        )
+        result = crop_import(full, r0, r1, c0, c1)
     created = not root.exists()
     root.mkdir(parents=True, exist_ok=True)
     try:
@@ -194,6 +224,7 @@ def _run_import_dem(args: argparse.Namespace) -> int:
         else f"ellipsoidal (WGS84); site vertical datum: {geoid.datum}"
     )
     print(f"  source heights: {datum}")
+    print(f"  site bounds: {bounds_note}; resampling {args.resampling}, cell {g.cell_m:g} m")
     for info, cells in zip(infos, result.tile_cells, strict=True):
         unit = info.z_unit_m(z_unit)
         print(f"  {info.path}: {info.crs_name}, height unit {unit:.10g} m, {cells:,} cells")
@@ -415,8 +446,27 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--geoid-undulation", type=finite, metavar="N", help="new site: one constant N (m)"
     )
     p.add_argument("--z-unit", choices=tuple(_Z_UNITS), help="height unit (default: per file)")
-    p.add_argument("--cell", type=positive, metavar="M", help="cell size (default: native)")
-    p.add_argument("--bounds", type=float, nargs=4, metavar=("XMIN", "YMIN", "XMAX", "YMAX"))
+    p.add_argument(
+        "--cell",
+        type=positive,
+        metavar="M",
+        help="cell size (default: native; a finer cell keeps more of the source's detail)",
+    )
+    p.add_argument(
+        "--resampling",
+        choices=_RESAMPLING,
+        default="bilinear",
+        help="how the tiles are sampled at the site's cells (default bilinear; average "
+        "for a cell coarser than the tiles')",
+    )
+    p.add_argument(
+        "--bounds",
+        type=float,
+        nargs=4,
+        metavar=("XMIN", "YMIN", "XMAX", "YMAX"),
+        help="site-frame bounds (m); default the largest rectangle inside the tiles' "
+        "warped footprint",
+    )
     p.add_argument(
         "--anchor", type=float, nargs=3, metavar=("LAT", "LON", "H"), help="new site's anchor"
     )
