@@ -19,6 +19,7 @@ from typing import Any, Literal
 import numpy as np
 
 from ..errors import CrsError, InputFileError
+from ..geo.geoid import GeoidModel, as_geoid
 from ..geo.geodesy import LocalFrame, as_crs, cached_transformer, horizontal_crs, z_unit_m_of
 from .pointcloud import GROUND_CLASS, PointCloud
 
@@ -123,7 +124,7 @@ def select_surface(
 
 
 def anchor_for_cloud(
-    xyz: np.ndarray, crs: CloudCrs, *, geoid_undulation_m: float = 0.0
+    xyz: np.ndarray, crs: CloudCrs, *, geoid_undulation_m: float | GeoidModel = 0.0
 ) -> LocalFrame:
     """A frame anchor at the centre of the cloud's footprint, on the ground.
 
@@ -132,9 +133,9 @@ def anchor_for_cloud(
     xyz : ndarray, shape (n, 3)
         Points in ``crs`` (its units).
     crs : CloudCrs
-    geoid_undulation_m : float
-        ``N`` (m): the points' heights are orthometric and ``h = H * z_unit_m + N``;
-        0 when they are ellipsoidal.
+    geoid_undulation_m : float or GeoidModel
+        ``N`` (m), or the geoid evaluated at the anchor: the points' heights are
+        orthometric and ``h = H * z_unit_m + N``; 0 when they are ellipsoidal.
 
     Returns
     -------
@@ -158,5 +159,6 @@ def anchor_for_cloud(
     lon, lat = cached_transformer(h.to_wkt(), "EPSG:4326").transform(centre[0], centre[1])
     if not (np.isfinite(lon) and np.isfinite(lat)):
         raise CrsError(f"the cloud's centre cannot be converted from {crs.name!r} to WGS84")
-    h_m = z0 * crs.z_unit_m + float(geoid_undulation_m)
+    n_m = float(as_geoid(geoid_undulation_m).undulation_m(lat, lon))
+    h_m = z0 * crs.z_unit_m + n_m
     return LocalFrame(round(float(lat), 7), round(float(lon), 7), round(h_m, 3))

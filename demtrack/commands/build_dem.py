@@ -36,7 +36,7 @@ def _run(args: argparse.Namespace) -> int:
         return run_new_site(args)
     if args.output is None:
         raise InputFileError("give -o DEM.tif, or --new-site DIR to create a site")
-    for flag in ("vertical_datum", "geoid_undulation", "z_unit", "name"):
+    for flag in ("vertical_datum", "geoid", "geoid_undulation", "z_unit", "name"):
         if getattr(args, flag) is not None:
             raise InputFileError(f"--{flag.replace('_', '-')} is for --new-site")
 
@@ -174,7 +174,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--vertical-datum",
         choices=("ellipsoidal", "orthometric"),
         help="--new-site: what the points' heights are measured from (orthometric: "
-        "h = H + N with --geoid-undulation N)",
+        "h = H + N with --geoid egm96|FILE or --geoid-undulation N)",
+    )
+    p.add_argument(
+        "--geoid",
+        metavar="egm96|FILE|none",
+        help="--new-site: the site's geoid, evaluated per point (EGM96 from proj-data's "
+        "egm96_15.gtx, or a PROJ-readable grid file, copied into the site)",
     )
     p.add_argument("--geoid-undulation", type=float, metavar="N", help="N (m), --new-site")
     p.add_argument("--z-unit", choices=("m", "ft", "ftUS"), help="height unit (default: the CRS's)")

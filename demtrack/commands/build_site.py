@@ -12,16 +12,24 @@ import argparse
 import os
 import shutil
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from demtrack.core.errors import InputFileError, SiteError
+
+if TYPE_CHECKING:
+    from demtrack.core.geo.geoid import GeoidModel
 
 __all__ = ["run_new_site"]
 
 _Z_UNITS = {"m": 1.0, "ft": 0.3048, "ftUS": 1200.0 / 3937.0}
 
 
-def _check_options(args: argparse.Namespace) -> float:
-    """The geoid undulation N (m) the heights are converted with; refuse mixed options."""
+def _check_options(args: argparse.Namespace) -> tuple[GeoidModel, Path | None]:
+    """The geoid the heights are converted with (and a user's grid file to copy in)."""
+    from demtrack.core.geo.geoid import GeoidModel
+
+    from .site_import import _geoid_choice
+
     root: Path = args.new_site
     if args.output is not None or args.site is not None:
         raise InputFileError("--new-site writes DIR/dem.tif; leave out -o and --site")
@@ -34,19 +42,29 @@ def _check_options(args: argparse.Namespace) -> float:
             "--new-site needs --vertical-datum ellipsoidal|orthometric: what the points' "
             "heights are measured from"
         )
+    given, n_given = args.geoid, args.geoid_undulation
+    if given is not None and n_given is not None:
+        raise InputFileError("give either --geoid or --geoid-undulation, not both")
     if args.vertical_datum == "orthometric":
-        if args.geoid_undulation is None:
+        if n_given is not None:
+            return GeoidModel.constant(float(n_given)), None
+        if given is None:
             raise InputFileError(
-                "orthometric heights need the site's geoid undulation: --geoid-undulation N "
-                "(m, h = H + N)"
+                "orthometric heights need the site's geoid: --geoid egm96|FILE "
+                "(evaluated per point) or --geoid-undulation N (m, h = H + N)"
             )
-        return float(args.geoid_undulation)
-    if args.geoid_undulation not in (None, 0.0):
+        geoid, grid_file = _geoid_choice(given, root)
+        if not geoid.orthometric:
+            raise InputFileError("--vertical-datum orthometric needs a geoid, not --geoid none")
+        return geoid, grid_file
+    if n_given not in (None, 0.0):
         raise InputFileError(
             "--geoid-undulation is for --vertical-datum orthometric; ellipsoidal heights "
             "are used as they are"
         )
-    return 0.0
+    if given is not None:  # the site states it for later imports and exports
+        return _geoid_choice(given, root)
+    return GeoidModel.ellipsoidal(), None
 
 
 def run_new_site(args: argparse.Namespace) -> int:
@@ -54,6 +72,8 @@ def run_new_site(args: argparse.Namespace) -> int:
     import numpy as np
     from scipy.spatial import ConvexHull, QhullError
 
+    from demtrack.core.geo.geoid import GeoidModel
+    from demtrack.core.site.folder import vertical_datum_doc
     from demtrack.core.site.update import new_manifest, write_dem_atomic, write_manifest
     from demtrack.core.terrain.cloud_site import anchor_for_cloud, cloud_crs, select_surface
     from demtrack.core.terrain.crs_import import local_crs_wkt, points_to_local
@@ -61,7 +81,8 @@ def run_new_site(args: argparse.Namespace) -> int:
     from demtrack.core.terrain.pointcloud import read_point_cloud
     from demtrack.core.terrain.tin import Coverage, grid_points_tin
 
-    n_geoid = _check_options(args)
+    geoid, grid_file = _check_options(args)
+    n_geoid = geoid if args.vertical_datum == "orthometric" else 0.0
     root: Path = args.new_site
     surface = args.surface or "dtm"
     interpolate = args.interpolate or "tin"
@@ -102,7 +123,16 @@ def run_new_site(args: argparse.Namespace) -> int:
     tmp.mkdir(parents=True)
     try:
         write_dem_atomic(tmp / "dem.tif", dem)
-        write_manifest(tmp, new_manifest(args.name or root.name, frame, n_geoid))
+        doc = new_manifest(args.name or root.name, frame, 0.0)
+        if grid_file is not None:
+            (tmp / "geoid").mkdir()
+            shutil.copyfile(grid_file, tmp / "geoid" / grid_file.name)
+            geoid = GeoidModel.from_grid(tmp / "geoid" / grid_file.name, geoid.name)
+        doc["vertical_datum"] = vertical_datum_doc(geoid, tmp)  # relative: same once renamed
+        doc["geoid_undulation_m"] = round(
+            float(geoid.undulation_m(frame.lat_deg, frame.lon_deg)), 3
+        )
+        write_manifest(tmp, doc)
         if root.exists():
             root.rmdir()  # checked empty above
         tmp.rename(root)
@@ -112,7 +142,7 @@ def run_new_site(args: argparse.Namespace) -> int:
     g = dem.grid
     lo, hi = dem.elevation_range()
     datum = (
-        f"orthometric, h = H + N with N = {n_geoid:.3f} m"
+        f"orthometric, h = H + N with N from {geoid.description}"
         if args.vertical_datum == "orthometric"
         else "ellipsoidal (WGS84)"
     )

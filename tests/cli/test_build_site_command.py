@@ -6,12 +6,19 @@ import numpy as np
 import pytest
 from pyproj import CRS, Transformer
 
+from geoid_oracle import egm96_n
+
 from demtrack.cli import main
+from demtrack.core.geo.geoid import EGM96_GRID, find_grid
 from demtrack.core.site.folder import load_site
 from demtrack.core.terrain.pointcloud import read_point_cloud
 
 FOOT_M = 0.3048
 N_GEOID = -21.5
+
+
+def egm96_grid():
+    return find_grid(EGM96_GRID)
 
 
 def run(capsys, *argv):
@@ -32,7 +39,8 @@ def test_a_site_from_the_autzen_tile_in_feet(capsys, tmp_path, autzen_laz):
     assert status == 0, err
     print(out)
     assert "horizontal unit foot (0.3048 m)" in out and "interpolate tin" in out
-    assert "h = H + N with N = -21.500 m" in out and "holes (11." in out
+    assert "h = H + N with N from the site's constant geoid undulation N = -21.5 m" in out
+    assert "holes (11." in out
     site = load_site(root)
     assert site.geoid_undulation_m == N_GEOID
     # The DEM passes through the ground points: convert them independently (pyproj).
@@ -48,6 +56,33 @@ def test_a_site_from_the_autzen_tile_in_feet(capsys, tmp_path, autzen_laz):
     rms = float(np.sqrt(np.mean(dz[ok] ** 2)))
     assert rms < 0.06 and abs(float(np.mean(dz[ok]))) < 0.005
     assert not list(tmp_path.glob(".*building*"))
+
+
+@pytest.mark.skipif(egm96_grid() is None, reason="needs proj-data's egm96_15.gtx")
+def test_orthometric_points_through_egm96_per_point(capsys, tmp_path, autzen_laz):
+    root = tmp_path / "autzen"
+    status, out, err = run(
+        capsys, "build-dem", autzen_laz, "--new-site", root, "--cell", "2",
+        "--vertical-datum", "orthometric", "--geoid", "egm96",
+    )  # fmt: skip
+    assert status == 0, err
+    assert "EGM96" in out
+    site = load_site(root)
+    assert site.geoid.kind == "grid" and site.geoid.name == "EGM96"
+    cloud = read_point_cloud(autzen_laz).select(ground_only=True)
+    x, y, z = cloud.xyz.T
+    lon, lat = Transformer.from_crs(
+        CRS.from_wkt(cloud.crs_wkt), "EPSG:4326", always_xy=True
+    ).transform(x, y)
+    n = egm96_n(lat, lon)  # the grid read by rasterio, interpolated independently
+    assert site.geoid_undulation_m == pytest.approx(
+        float(egm96_n(np.array([site.frame.lat_deg]), np.array([site.frame.lon_deg]))[0]),
+        abs=1e-3,
+    )
+    e, nn, u = site.frame.to_enu(lat, lon, z * FOOT_M + n)
+    dz = site.dem.sample(e, nn) - u
+    ok = np.isfinite(dz)
+    assert ok.mean() > 0.99 and abs(float(np.mean(dz[ok]))) < 0.01
 
 
 def test_a_surface_model_is_above_the_terrain_model(capsys, tmp_path, autzen_laz):
@@ -113,7 +148,11 @@ def test_bad_inputs_are_one_line_and_leave_nothing(capsys, tmp_path, write_las):
          "--z-unit"),
         (["build-dem", tmp_path / "ok.las", "--new-site", root], "--vertical-datum"),
         (["build-dem", tmp_path / "ok.las", "--new-site", root, "--vertical-datum",
-          "orthometric"], "--geoid-undulation"),
+          "orthometric"], "--geoid egm96|FILE"),
+        (["build-dem", tmp_path / "ok.las", "--new-site", root, "--vertical-datum",
+          "orthometric", "--geoid", "none"], "needs a geoid"),
+        (["build-dem", tmp_path / "ok.las", "--new-site", root, "--vertical-datum",
+          "orthometric", "--geoid", tmp_path / "missing.gtx"], "geoid grid not found"),
         (["build-dem", tmp_path / "ok.las", "--new-site", root, *vd, "--first-returns",
           "--ground-only", "--bounds", "0", "0", "1", "1"], "inside"),
     ]  # fmt: skip
