@@ -42,13 +42,19 @@ from typing import Any, Literal
 import numpy as np
 
 from ..errors import CameraError, SiteError
-from ..geo.geodesy import LocalFrame, horizontal_crs, meridian_convergence_deg
+from ..geo.geodesy import (
+    LocalFrame,
+    cached_transformer,
+    horizontal_crs,
+    meridian_convergence_deg,
+)
 from ..terrain.dem import Dem
 from .pinhole import Camera, Intrinsics, rotation_from_azimuth_tilt_roll
 
 __all__ = [
     "SurveyedPose",
     "check_camera_on_dem",
+    "grid_convergence_deg",
     "pose_from_rotation",
     "pose_from_survey",
     "rotation_from_opk_deg",
@@ -231,6 +237,29 @@ def rotation_from_opk_deg(omega_deg: float, phi_deg: float, kappa_deg: float) ->
     return rx @ ry @ rz @ _FLIP_YZ
 
 
+def grid_convergence_deg(crs: Any, x: float, y: float) -> float:
+    """True azimuth of the grid-north direction at ``(x, y)`` of a projected CRS (degrees).
+
+    Measured, not taken from the projection's formula: the points 10 units south and
+    north of ``(x, y)`` are converted to WGS84 as demtrack converts positions (pyproj,
+    datum shift included), and the WGS84 ellipsoid's azimuth between them is returned.
+    For a CRS on WGS84 (UTM) this is the meridian convergence ``gamma`` to 1e-9 deg. On
+    an older datum it also holds the datum shift's turn: for MGI / Austria Lambert the
+    formula at the WGS84 position is 0.002 deg off (a 250 m datum shift moves the point
+    along the projection), and the grid rotation weitsicht computes between UTM 33N and
+    Lambert is matched to 5e-5 deg. Geographic CRSs give 0.
+    """
+    hcrs = horizontal_crs(crs)
+    if not hcrs.is_projected:
+        return 0.0
+    from pyproj import Geod
+
+    tr = cached_transformer(hcrs.to_wkt(), "EPSG:4326")
+    lon, lat = tr.transform([float(x), float(x)], [float(y) - 10.0, float(y) + 10.0])
+    az, _, _ = Geod(ellps="WGS84").inv(lon[0], lat[0], lon[1], lat[1])
+    return float(az)
+
+
 def pose_from_rotation(
     frame: LocalFrame,
     intrinsics: Intrinsics,
@@ -291,7 +320,8 @@ def pose_from_rotation(
     lat, lon, h = (float(v) for v in frame.to_geodetic(*p_enu))
     # A grid direction at grid azimuth a has true azimuth a + gamma: turn it clockwise
     # by gamma about the vertical.
-    _, gamma = true_azimuth_deg(0.0, north, crs, lat, lon)
+    true_azimuth_deg(0.0, north, crs, lat, lon)  # refuses a grid north of degrees
+    gamma = grid_convergence_deg(crs, x, y) if north == "grid" else 0.0
     g = math.radians(gamma)
     r_true_grid = np.array(
         [[math.cos(g), math.sin(g), 0.0], [-math.sin(g), math.cos(g), 0.0], [0.0, 0.0, 1.0]]

@@ -386,13 +386,14 @@ def site_hits_in_dem_crs(
 
 def rays_in_grid_axes(site: Any, cam: Any, case: PeerCase) -> tuple[np.ndarray, np.ndarray]:
     """demtrack's rays for the case's pixels in the DEM CRS: origin (E, N, H) and grid axes."""
-    from demtrack.core.geo.geodesy import LocalFrame, meridian_convergence_deg
+    from demtrack.core.camera.pose import grid_convergence_deg
+    from demtrack.core.geo.geodesy import LocalFrame
 
     o_enu, d_enu = cam.pixel_to_ray(case.pixels[:, 0], case.pixels[:, 1])
     lat, lon, h = (float(v) for v in site.frame.to_geodetic(*cam.position_enu))
     at_cam = LocalFrame(lat, lon, h)
     d_true = d_enu @ (at_cam.R_enu_ecef @ site.frame.R_enu_ecef.T).T
-    g = math.radians(float(meridian_convergence_deg(case.dem_crs, lat, lon)))
+    g = math.radians(grid_convergence_deg(case.dem_crs, *case.position[:2]))
     r_grid_true = np.array(
         [[math.cos(g), -math.sin(g), 0.0], [math.sin(g), math.cos(g), 0.0], [0.0, 0.0, 1.0]]
     )
@@ -422,7 +423,9 @@ def _row(name: str, xyz: np.ndarray, peer: np.ndarray) -> str:
 def main(work: Path) -> None:  # pragma: no cover - the documented run
     """Print the comparison table (Markdown) for every DEM case."""
     cases = load_cases()
-    print("| case / path | points | horiz. median (m) | horiz. max (m) | vert. median (m) | vert. max (m) |")  # noqa: E501, T201
+    print(
+        "| case / path | points | horiz. median (m) | horiz. max (m) | vert. median (m) | vert. max (m) |"
+    )  # noqa: E501, T201
     print("|---|---:|---:|---:|---:|---:|")  # noqa: T201
     for case in cases:
         x, y, _ = case.position
@@ -446,7 +449,9 @@ def main(work: Path) -> None:  # pragma: no cover - the documented run
         print(f"|   (camera position round trip through the site frame: {trip:.2f} mm) |")  # noqa: T201
         o_enu, d_enu = cam.pixel_to_ray(case.pixels[:, 0], case.pixels[:, 1])
         p = geodetic_march(dem, site.frame, case.dem_crs, n, o_enu[0], d_enu, t_max)
-        gx, gy, gh = site.frame.from_enu_to_crs(*p.T, case.dem_crs, geoid_undulation_m=n, z_unit_m=1.0)
+        gx, gy, gh = site.frame.from_enu_to_crs(
+            *p.T, case.dem_crs, geoid_undulation_m=n, z_unit_m=1.0
+        )
         print(_row(f"{case.key}: geodetic march", np.column_stack([gx, gy, gh]), case.xyz_peer))  # noqa: E501, T201
 
 
