@@ -242,7 +242,8 @@ def grid_convergence_deg(crs: Any, x: float, y: float) -> float:
 
     Measured, not taken from the projection's formula: the points 10 units south and
     north of ``(x, y)`` are converted to WGS84 as demtrack converts positions (pyproj,
-    datum shift included), and the WGS84 ellipsoid's azimuth between them is returned.
+    datum shift included), and the WGS84 ellipsoid's azimuth between them at their
+    midpoint is returned.
     For a CRS on WGS84 (UTM) this is the meridian convergence ``gamma`` to 1e-9 deg. On
     an older datum it also holds the datum shift's turn: for MGI / Austria Lambert the
     formula at the WGS84 position is 0.002 deg off (a 250 m datum shift moves the point
@@ -256,8 +257,12 @@ def grid_convergence_deg(crs: Any, x: float, y: float) -> float:
 
     tr = cached_transformer(hcrs.to_wkt(), "EPSG:4326")
     lon, lat = tr.transform([float(x), float(x)], [float(y) - 10.0, float(y) + 10.0])
-    az, _, _ = Geod(ellps="WGS84").inv(lon[0], lat[0], lon[1], lat[1])
-    return float(az)
+    az12, az21, _ = Geod(ellps="WGS84").inv(lon[0], lat[0], lon[1], lat[1])
+    # The chord's azimuths at its two ends differ from the grid line's by the arc-to-chord
+    # correction, in opposite senses (1.3e-6 deg for 20 m at 120 km from the UTM central
+    # meridian): their mean is the azimuth at the midpoint, (x, y).
+    fwd2 = az21 + 180.0
+    return float(az12 + 0.5 * ((fwd2 - az12 + 180.0) % 360.0 - 180.0))
 
 
 def pose_from_rotation(
