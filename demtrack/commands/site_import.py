@@ -280,9 +280,12 @@ def _pose(args: argparse.Namespace, site: Site, intr: Intrinsics, crs: Any) -> S
         import numpy as np
 
         rot = np.asarray(args.rotation, dtype=float).reshape(3, 3)
-    return pose_from_rotation(
-        site.frame, intr, x, y, z, crs, rot, north=args.north, geoid_undulation_m=n_geoid
-    )
+    try:
+        return pose_from_rotation(
+            site.frame, intr, x, y, z, crs, rot, north=args.north, geoid_undulation_m=n_geoid
+        )
+    except CameraError as exc:
+        raise CameraError(f"{given[0]}: {exc}") from None
 
 
 def _run_add_camera(args: argparse.Namespace) -> int:
