@@ -49,11 +49,14 @@ __all__ = [
     "geodetic_march",
     "grid_march",
     "load_cases",
+    "load_plane_cases",
+    "write_plane_dem",
     "site_hits_in_dem_crs",
 ]
 
 DATA_DIR = Path(os.environ.get("DEMTRACK_WEITSICHT_DATA", "/work/shared/data/weitsicht"))
 EGM96_GRID = Path("/usr/share/proj/egm96_15.gtx")
+T_MAX_M = 2000.0  # longer than every ray here (the cameras fly 120-960 m above ground)
 
 # CRSs of the DEMs, horizontal part (the heights are orthometric: AHD, GHA).
 DEM_CRS = {"tennis_court_dem01": "EPSG:28355", "ariel_flight_dtm": "EPSG:31287"}
@@ -87,6 +90,10 @@ class PeerCase:
         weitsicht's ground sampling distance at each point (m).
     undulation_m : float or None
         EGM96 ``N`` weitsicht used for this pose, where it converted one (ariel).
+    plane_h_m : ndarray, shape (n,), or None
+        Plane cases: the ellipsoidal height of each of weitsicht's points on its 0 m
+        EGM96 plane (``dem_path`` is then a flat GeoTIFF written by :func:`write_plane_dem`,
+        heights ellipsoidal, and ``dem_crs`` is UTM 36N).
     """
 
     key: str
@@ -100,6 +107,7 @@ class PeerCase:
     xyz_peer: np.ndarray
     gsd_m: np.ndarray
     undulation_m: float | None
+    plane_h_m: np.ndarray | None = None
 
 
 def _intrinsics(cam: dict[str, Any], size: list[int]) -> dict[str, Any]:
@@ -163,6 +171,71 @@ def load_cases(data_dir: Path = DATA_DIR) -> list[PeerCase]:
             )
         )
     return out
+
+
+def load_plane_cases(dem_dir: Path, data_dir: Path = DATA_DIR) -> list[PeerCase]:
+    """The plane cases (DSC00316 and the four dugong images), poses in UTM 36N + h.
+
+    ``dem_dir`` is where :func:`write_plane_dem` puts each case's flat GeoTIFF.
+    """
+    doc = json.loads((data_dir / "cases.json").read_text(encoding="utf-8"))
+    by_id = {c["id"]: c for c in doc["cases"]}
+    images = [("dsc00316_meta_eor", by_id["dsc00316_meta_eor"]["peer_reference"])]
+    images += [("dugong_survey", im) for im in by_id["dugong_survey"]["peer_reference"]["images"]]
+    out = []
+    for case_id, im in images:
+        extra = im.get("example_point_04_02", []) + im.get("example_point_04_01", [])
+        pts = [p for p in im.get("grid", []) + extra if p["hit"]]
+        if not pts:  # dugong images 1, 2 and 4: only footprints were mapped
+            continue
+        uv, ids, xyz, gsd = _points(pts)
+        name = Path(im["image"]).stem
+        out.append(
+            PeerCase(
+                f"{case_id}/{name}",
+                dem_dir / f"plane_{name}.tif",
+                "EPSG:32636",
+                _intrinsics(im["camera_from_metadata"], im["image_size"]),
+                np.array(im["position"], dtype=float),
+                np.array(im["R_world_cam_opencv_axes"], dtype=float),
+                uv,
+                ids,
+                xyz,
+                gsd,
+                None,
+                np.array([p["h_ellipsoidal"] for p in pts], dtype=float),
+            )
+        )
+    return out
+
+
+def write_plane_dem(case: PeerCase, half_m: float = 300.0, cell_m: float = 2.0) -> Path:
+    """A flat GeoTIFF in UTM 36N at the median ellipsoidal height of the peer's plane hits.
+
+    weitsicht's plane is 0 m EGM96, so its ellipsoidal height follows EGM96 across the
+    footprint (a spread of 0.5-7 mm here); one height is what a flat DEM can hold.
+    """
+    from rasterio.transform import from_origin
+
+    assert case.plane_h_m is not None
+    n = int(round(2 * half_m / cell_m))
+    x0 = math.floor(case.position[0] - half_m)
+    y0 = math.ceil(case.position[1] + half_m)
+    z = np.full((n, n), float(np.median(case.plane_h_m)), dtype=np.float32)
+    profile = {
+        "driver": "GTiff", "width": n, "height": n, "count": 1, "dtype": "float32",
+        "crs": case.dem_crs, "transform": from_origin(x0, y0, cell_m, cell_m),
+    }  # fmt: skip
+    case.dem_path.parent.mkdir(parents=True, exist_ok=True)
+    with rasterio.open(case.dem_path, "w", **profile) as dst:
+        dst.write(z, 1)
+    return case.dem_path
+
+
+def plane_hits(origin: np.ndarray, d_grid: np.ndarray, h_m: np.ndarray) -> np.ndarray:
+    """Rays cut with the horizontal planes ``z = h_m`` of the grid-Cartesian frame (analytic)."""
+    t = (h_m - origin[2]) / d_grid[:, 2]
+    return origin[None, :] + t[:, None] * d_grid
 
 
 def egm96_undulation_m(lat_deg: float, lon_deg: float) -> float:
@@ -317,6 +390,7 @@ def build_site(
     half_width_m: float | None = None,
     sensor_id: str = "cam",
     pixel_shift: float = 0.0,
+    datum: str = "orthometric",
 ) -> Path:
     """``import-dem`` + ``add-camera --rotation`` for one case, as a user would.
 
@@ -332,7 +406,7 @@ def build_site(
     ground = float(GridMarch(case.dem_path).height(np.array([x]), np.array([y]))[0])
     if not (root / "site.json").is_file():
         argv = [
-            "import-dem", "--site", root, "--vertical-datum", "orthometric",
+            "import-dem", "--site", root, "--vertical-datum", datum,
             "--geoid-undulation", f"{undulation_m:.4f}",
             "--anchor", f"{lat:.9f}", f"{lon:.9f}", f"{ground + undulation_m:.3f}",
         ]  # fmt: skip
@@ -350,7 +424,7 @@ def build_site(
     _cli(
         [
             "add-camera", "--site", root, "--id", sensor_id, "--crs", case.dem_crs,
-            "--vertical-datum", "orthometric", "--position", *(f"{v:.4f}" for v in case.position),
+            "--vertical-datum", datum, "--position", *(f"{v:.4f}" for v in case.position),
             "--rotation", *(repr(float(v)) for v in case.R_grid_cam.ravel()),
             "--intrinsics", intr_path, "--replace",
         ]
@@ -412,47 +486,53 @@ def differences(xyz: np.ndarray, peer: np.ndarray) -> tuple[np.ndarray, np.ndarr
 # --------------------------------------------------------------------------- the table
 
 
-def _row(name: str, xyz: np.ndarray, peer: np.ndarray) -> str:
+def _row(name: str, path: str, xyz: np.ndarray, peer: np.ndarray) -> str:
     dh, dv = differences(xyz, peer)
     return (
-        f"| {name} | {len(peer)} | {np.median(dh):.4f} | {dh.max():.4f} | "
+        f"| {name} | {path} | {len(peer)} | {np.median(dh):.4f} | {dh.max():.4f} | "
         f"{np.median(dv):.4f} | {dv.max():.4f} |"
     )
 
 
 def main(work: Path) -> None:  # pragma: no cover - the documented run
-    """Print the comparison table (Markdown) for every DEM case."""
-    cases = load_cases()
-    print(
-        "| case / path | points | horiz. median (m) | horiz. max (m) | vert. median (m) | vert. max (m) |"
-    )  # noqa: E501, T201
-    print("|---|---:|---:|---:|---:|---:|")  # noqa: T201
-    for case in cases:
-        x, y, _ = case.position
-        from pyproj import Transformer
+    """Print the comparison table (Markdown) for every case."""
+    from pyproj import Transformer
 
+    head = "| case | path | points | horiz. median (m) | horiz. max (m) | vert. median (m) | vert. max (m) |"  # noqa: E501
+    print(head)  # noqa: T201
+    print("|---|---|---:|---:|---:|---:|---:|")  # noqa: T201
+    for case in load_cases():
+        x, y, _ = case.position
         lon, lat = Transformer.from_crs(case.dem_crs, "EPSG:4326", always_xy=True).transform(x, y)
         n = case.undulation_m if case.undulation_m is not None else egm96_undulation_m(lat, lon)
         dem = GridMarch(case.dem_path)
-        t_max = 2.0 * float(case.position[2] - np.nanmin(case.xyz_peer[:, 2])) + 500.0
-        for label, cell, half in (("native cell", None, None), ("1 m cells", 1.0, 700.0)):
-            root = work / f"{case.key.replace('/', '_')}_{label.split()[0]}"
+        for label, cell, half in (
+            ("site, native cells", None, None),
+            ("site, 1 m cells", 1.0, 700.0),
+        ):
+            root = work / f"{case.key.replace('/', '_')}_{label.split()[1]}"
             build_site(root, case, n, cell_m=cell, half_width_m=half)
             xyz, site, cam = site_hits_in_dem_crs(root, case)
-            print(_row(f"{case.key}: site path, {label}", xyz, case.xyz_peer))  # noqa: T201
+            print(_row(case.key, label, xyz, case.xyz_peer))  # noqa: T201
         origin, d_grid = rays_in_grid_axes(site, cam, case)
         # The peer's own origin: the camera position's round trip through the site frame
         # (up to 1 mm with MGI's 2-D Helmert, see docs/real-data.md) is not the camera model.
-        hits = grid_march(dem, case.position, d_grid, t_max)
-        print(_row(f"{case.key}: grid-Cartesian march", hits, case.xyz_peer))  # noqa: T201
-        trip = 1000 * np.abs(origin - case.position).max()
-        print(f"|   (camera position round trip through the site frame: {trip:.2f} mm) |")  # noqa: T201
+        hits = grid_march(dem, case.position, d_grid, T_MAX_M)
+        print(_row(case.key, "grid-Cartesian march", hits, case.xyz_peer))  # noqa: T201
         o_enu, d_enu = cam.pixel_to_ray(case.pixels[:, 0], case.pixels[:, 1])
-        p = geodetic_march(dem, site.frame, case.dem_crs, n, o_enu[0], d_enu, t_max)
-        gx, gy, gh = site.frame.from_enu_to_crs(
-            *p.T, case.dem_crs, geoid_undulation_m=n, z_unit_m=1.0
-        )
-        print(_row(f"{case.key}: geodetic march", np.column_stack([gx, gy, gh]), case.xyz_peer))  # noqa: E501, T201
+        p = geodetic_march(dem, site.frame, case.dem_crs, n, o_enu[0], d_enu, T_MAX_M)
+        g = site.frame.from_enu_to_crs(*p.T, case.dem_crs, geoid_undulation_m=n, z_unit_m=1.0)
+        print(_row(case.key, "geodetic march", np.column_stack(g), case.xyz_peer))  # noqa: T201
+        trip = 1000 * np.abs(origin - case.position).max()
+        print(f"| {case.key} | camera position round trip | | {trip:.2f} mm | | | |")  # noqa: T201
+    for case in load_plane_cases(work / "planes"):
+        write_plane_dem(case)
+        root = build_site(work / case.key.replace("/", "_"), case, 0.0, datum="ellipsoidal")
+        xyz, site, cam = site_hits_in_dem_crs(root, case)
+        print(_row(case.key, "site, flat DEM (2 m)", xyz, case.xyz_peer))  # noqa: T201
+        _, d_grid = rays_in_grid_axes(site, cam, case)
+        hits = plane_hits(case.position, d_grid, case.plane_h_m)
+        print(_row(case.key, "grid-Cartesian plane", hits, case.xyz_peer))  # noqa: T201
 
 
 if __name__ == "__main__":  # pragma: no cover
