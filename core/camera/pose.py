@@ -8,8 +8,10 @@ orientation measured *at the camera*:
   sun shot or a GNSS heading gives), or **grid** north of a projected CRS (what a bearing
   taken off a UTM or state-plane map or computed from two grid coordinates gives). A grid
   azimuth becomes a true one by adding the meridian convergence ``gamma`` at the camera
-  (PROJ's ``Proj.get_factors``; ``true = grid + gamma``; +0.89 deg at Bushy Run in
-  UTM 17N). Ignoring it turns the view by ``gamma``: 16 m of ground error at 1 km for
+  (``true = grid + gamma``; +0.89 deg at Bushy Run in UTM 17N), measured through the
+  same pyproj conversion as the position (:func:`grid_convergence_deg`: PROJ's
+  ``Proj.get_factors`` value on WGS84-based grids, plus the datum shift's turn on older
+  ones). Ignoring it turns the view by ``gamma``: 16 m of ground error at 1 km for
   0.9 deg.
 * tilt (elevation of the axis, negative looks down) against the horizontal at the
   camera, i.e. the plane normal to the WGS84 ellipsoid normal there. A levelled
@@ -177,6 +179,11 @@ def pose_from_survey(
     p_enu = np.array([float(e), float(n), float(u)])
     lat, lon, h = (float(v) for v in frame.to_geodetic(*p_enu))
     az_true, gamma = true_azimuth_deg(az_deg, north, crs, lat, lon)
+    if north == "grid":
+        # Measured through the position's own conversion (datum shift included), as for
+        # rotation matrices: the formula at the WGS84 position is off on older datums.
+        gamma = grid_convergence_deg(crs, x, y)
+        az_true = float(az_deg) + gamma
     r_local_cam = rotation_from_azimuth_tilt_roll(az_true, float(tilt_deg), float(roll_deg))
     return _in_site(frame, intrinsics, p_enu, (lat, lon, h), r_local_cam, az_true, gamma)
 
