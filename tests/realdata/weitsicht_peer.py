@@ -42,14 +42,20 @@ import rasterio
 
 __all__ = [
     "DATA_DIR",
+    "EGM96_GRID",
+    "T_MAX_M",
     "GridMarch",
     "PeerCase",
     "build_site",
+    "differences",
     "egm96_undulation_m",
     "geodetic_march",
     "grid_march",
     "load_cases",
     "load_plane_cases",
+    "plane_hits",
+    "r_grid_site",
+    "rays_in_grid_axes",
     "write_plane_dem",
     "site_hits_in_dem_crs",
 ]
@@ -458,20 +464,28 @@ def site_hits_in_dem_crs(
     return np.column_stack([x, y, big_h]), site, cam
 
 
-def rays_in_grid_axes(site: Any, cam: Any, case: PeerCase) -> tuple[np.ndarray, np.ndarray]:
-    """demtrack's rays for the case's pixels in the DEM CRS: origin (E, N, H) and grid axes."""
+def r_grid_site(site: Any, cam: Any, case: PeerCase) -> np.ndarray:
+    """Rotation (3, 3) of site-frame vectors into the DEM CRS's grid axes at the camera.
+
+    Site ENU -> the camera's own true ENU (through ECEF) -> grid axes (turned by the grid
+    north that add-camera measured, :func:`~demtrack.core.camera.pose.grid_convergence_deg`).
+    """
     from demtrack.core.camera.pose import grid_convergence_deg
     from demtrack.core.geo.geodesy import LocalFrame
 
-    o_enu, d_enu = cam.pixel_to_ray(case.pixels[:, 0], case.pixels[:, 1])
     lat, lon, h = (float(v) for v in site.frame.to_geodetic(*cam.position_enu))
-    at_cam = LocalFrame(lat, lon, h)
-    d_true = d_enu @ (at_cam.R_enu_ecef @ site.frame.R_enu_ecef.T).T
+    r_true_site = LocalFrame(lat, lon, h).R_enu_ecef @ site.frame.R_enu_ecef.T
     g = math.radians(grid_convergence_deg(case.dem_crs, *case.position[:2]))
     r_grid_true = np.array(
         [[math.cos(g), -math.sin(g), 0.0], [math.sin(g), math.cos(g), 0.0], [0.0, 0.0, 1.0]]
     )
-    d_grid = d_true @ r_grid_true.T
+    return r_grid_true @ r_true_site
+
+
+def rays_in_grid_axes(site: Any, cam: Any, case: PeerCase) -> tuple[np.ndarray, np.ndarray]:
+    """demtrack's rays for the case's pixels in the DEM CRS: origin (E, N, H) and grid axes."""
+    _, d_enu = cam.pixel_to_ray(case.pixels[:, 0], case.pixels[:, 1])
+    d_grid = d_enu @ r_grid_site(site, cam, case).T
     x, y, big_h = site.frame.from_enu_to_crs(
         *cam.position_enu, case.dem_crs, geoid_undulation_m=site.geoid_undulation_m, z_unit_m=1.0
     )
