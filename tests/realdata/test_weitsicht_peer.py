@@ -146,6 +146,11 @@ def test_half_a_pixel_moves_the_answer_by_half_the_ground_sampling_distance(site
     # tilts each ground pixel a little differently.
     assert 0.8 < ratio.min() and ratio.max() < 1.2
     assert moved.min() > 20 * 2.5e-4  # far outside the camera-model tolerance
+    # The same through the user's path (1 m site, core Geolocator), against its own answer.
+    here, _, _ = site_hits_in_dem_crs(sites[key, "1m"], case)
+    there, _, _ = site_hits_in_dem_crs(sites[key, "1m"], shifted)
+    ratio = np.hypot(*(there - here)[:, :2].T) / (case.gsd_m * math.sqrt(2) / 2)
+    assert 0.8 < ratio.min() and ratio.max() < 1.2
 
 
 # --------------------------------------------------------------------------- the geometry
