@@ -176,3 +176,29 @@ def markers_geojson(state: ConsoleState) -> dict[str, Any]:
             }
         )
     return {"type": "FeatureCollection", "features": feats}
+
+
+def markers_document(state: ConsoleState, fmt: str) -> str:
+    """The markers as GPX waypoints or KML placemarks (orthometric heights; see the docs).
+
+    ``<ele>`` / KML ``absolute`` are heights above the geoid where the site has a model
+    (EGM96 with the grid installed), else ellipsoidal, and the document says which.
+    """
+    from ..core.io.export_waypoints import Waypoint, waypoints_gpx, waypoints_kml
+    from .track_export import site_heights, time_base
+
+    points = [
+        Waypoint(
+            m["name"],
+            float(m["lat_deg"]),
+            float(m["lon_deg"]),
+            float(m["h_m"]),
+            float(m["t_s"]),
+            "; ".join(x for x in (m.get("note") or "", f"MGRS {m['mgrs']}") if x),
+        )
+        for m in stored_markers(state)
+    ]
+    heights = site_heights(state.site)
+    times = time_base(None, wall_clock=True)
+    write = waypoints_gpx if fmt == "gpx" else waypoints_kml
+    return write(points, heights, times, name="demtrack markers")

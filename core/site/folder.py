@@ -83,7 +83,11 @@ class Sensor:
         )
 
     def to_dict(self, root: Path) -> dict[str, Any]:
-        """Manifest entry; the image path is written relative to ``root``."""
+        """Manifest entry; the image path is written relative to ``root``.
+
+        Both are resolved first: a loaded site holds its image as an absolute path while
+        ``root`` may be relative (``--site site``), and the two must still compare.
+        """
         out: dict[str, Any] = {
             "id": self.id,
             "name": self.name,
@@ -94,7 +98,7 @@ class Sensor:
         if self.roll_deg != 0.0:
             out["roll_deg"] = self.roll_deg
         if self.image_path is not None:
-            out["image"] = self.image_path.relative_to(root).as_posix()
+            out["image"] = self.image_path.resolve().relative_to(Path(root).resolve()).as_posix()
         return out
 
 

@@ -62,6 +62,7 @@ def rts_positions_reference(xs, fs, gains):
 
 # ---------------------------------------------------------------- fusion
 
+
 def _padded_d2(hits_xy: np.ndarray, hits_cov: np.ndarray, p_enu: np.ndarray) -> np.ndarray:
     """Smallest squared Mahalanobis distance of ``p_enu`` (na, nb, 3) to NaN-padded hits."""
     d = hits_xy - p_enu[:, :, None, :2]
@@ -134,6 +135,7 @@ def triangulation_cov_reference(
 
 
 # ---------------------------------------------------------------- gating
+
 
 def gate_reference(
     means_xy: np.ndarray,

@@ -1,7 +1,9 @@
 """``demtrack calibrate`` (GCP fit) and ``demtrack calibrate-yaw`` (pan-tilt landmarks).
 
 ``calibrate --gcps`` fits a camera to ground control points and writes it back into the
-site; ``calibrate-yaw`` estimates a pan-tilt head's yaw from landmark pan readings.
+site (atomically; the report is in ``calibrate_report``); ``convert-gcps`` turns ImGRAFT or
+CSV GCP files into demtrack's GCP CSV; ``calibrate-yaw`` estimates a pan-tilt head's yaw
+from landmark pan readings.
 """
 
 from __future__ import annotations
@@ -9,13 +11,14 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .choices import DEFAULT_FREE, FREE_PARAMETERS
+from .choices import DEFAULT_FREE, FREE_PARAMETERS, GCP_FORMATS, GCP_LOSSES
 from .common import add_site_argument, non_negative, positive
 
 if TYPE_CHECKING:
-    from demtrack.core.camera.gcp_calibration import GcpFit, LeaveOneOut
+    from demtrack.core.camera.gcp_calibration import GcpFit
     from demtrack.core.site.folder import Sensor, Site
 
 __all__ = ["register"]
@@ -87,125 +90,93 @@ def _fitted_sensor(site: Site, sensor: Sensor, fit: GcpFit) -> Sensor:
     return Sensor(sensor.id, sensor.name, head, sensor.pan_deg, tilt, sensor.image_path, roll)
 
 
-def _fmt(x: float, spec: str) -> str:
-    return format(x, spec) if math.isfinite(x) else "n/a".rjust(len(format(0.0, spec)))
+def _prior_position(args: argparse.Namespace, site: Site) -> dict[str, tuple[float, float]]:
+    """``--prior-position X,Y,Z,SIGMA`` (in ``--prior-crs``) as priors on x, y, z (site frame)."""
+    from demtrack.core.errors import CalibrationError, DemtrackError
 
-
-def _print_gcp_report(sensor: Sensor, fit: GcpFit, loo: LeaveOneOut, start) -> None:
-    import numpy as np
-
-    k = len(fit.names)
-    used = int((~fit.excluded).sum())
-    print(
-        f"{sensor.id} ({sensor.name}): fitted {','.join(fit.free)} to {k} GCPs "
-        f"({used} used), loss {fit.loss}; RMSE {fit.rmse_px:.2f} px over the GCPs used"
-    )
-    a0 = dict(zip(("yaw", "tilt", "roll"), start.azimuth_tilt_roll_deg(), strict=True))
-    i0 = start.intrinsics
-    before = {"f": i0.fx, "cx": i0.cx, "cy": i0.cy, "k1": i0.k1, "k2": i0.k2}
-    before.update(a0)
-    before.update(zip(("x", "y", "z"), start.position_enu, strict=True))
-    for name in fit.free:
-        print(
-            f"  {name:<5} {fit.values[name]:12.5f}  +- {_fmt(fit.sigmas[name], '.5f')}"
-            f"   (was {before[name]:.5f})"
+    text = args.prior_position
+    if text is None:
+        if args.prior_crs is not None:
+            raise CalibrationError("--prior-crs is given without --prior-position")
+        return {}
+    try:
+        vals = [float(t) for t in text.split(",")]
+    except ValueError:
+        vals = []
+    if len(vals) != 4 or not all(math.isfinite(v) for v in vals) or not vals[3] > 0:
+        raise CalibrationError(
+            f"--prior-position {text!r} is malformed: write X,Y,Z,SIGMA (SIGMA > 0, m)"
         )
-    print(
-        f"  {'GCP':<20}{'du px':>8}{'dv px':>8}{'|r| px':>8}{'LOO px':>8}{'LOO m':>8}"
-        f"{'range m':>9}{'graze':>7}{'m/px':>7}  note"
-    )
-    for i, name in enumerate(fit.names):
-        du, dv = fit.residuals_px[i]
-        notes = []
-        if fit.outliers[i]:
-            notes.append("OUTLIER, excluded" if fit.excluded[i] else "OUTLIER, kept")
-        if loo.grazing[i]:
-            notes.append(f"GRAZING (<{loo.grazing_threshold_deg:g} deg)")
-        if loo.status[i] not in ("ok", "outlier"):
-            notes.append(loo.status[i])
-        print(
-            f"  {name[:19]:<20}{du:+8.2f}{dv:+8.2f}{math.hypot(du, dv):8.2f}"
-            f"{_fmt(loo.reprojection_px[i], '8.2f')}{_fmt(loo.ground_error_m[i], '8.2f')}"
-            f"{_fmt(loo.range_m[i], '9.1f')}{_fmt(loo.grazing_deg[i], '7.1f')}"
-            f"{_fmt(loo.m_per_px[i], '7.2f')}  {'; '.join(notes)}"
-        )
-    ok = np.array([s == "ok" for s in loo.status])
-    if ok.any():
-        errs = loo.ground_error_m[ok]
-        errs = errs[np.isfinite(errs)]
-        if errs.size:
-            print(
-                f"  leave-one-out ground error: RMS {np.sqrt(np.mean(errs**2)):.2f} m, "
-                f"max {errs.max():.2f} m over {errs.size} GCPs"
+    crs = args.prior_crs or "local"
+    if crs.strip().lower() == "local":
+        xyz = vals[:3]
+    else:
+        if args.prior_vertical is None:
+            raise CalibrationError(
+                "--prior-position in a CRS needs --prior-vertical ellipsoidal|orthometric"
             )
-    print(f"  outlier threshold {fit.threshold_px:.2f} px")
-    for w in fit.warnings:
-        print(f"  warning: {w}")
-
-
-def _gcp_json(sensor: Sensor, fit: GcpFit, loo: LeaveOneOut, written: bool) -> dict:
-    def num(x: float) -> float | None:
-        return float(x) if math.isfinite(x) else None
-
-    return {
-        "sensor": sensor.id,
-        "free": list(fit.free),
-        "values": fit.values,
-        "sigmas": {k: num(v) for k, v in fit.sigmas.items()},
-        "rmse_px": fit.rmse_px,
-        "threshold_px": fit.threshold_px,
-        "loss": fit.loss,
-        "converged": fit.converged,
-        "written": written,
-        "gcps": [
-            {
-                "name": name,
-                "residual_px": [float(x) for x in fit.residuals_px[i]],
-                "outlier": bool(fit.outliers[i]),
-                "excluded": bool(fit.excluded[i]),
-                "loo_reprojection_px": num(loo.reprojection_px[i]),
-                "loo_ground_error_m": num(loo.ground_error_m[i]),
-                "loo_ground_error_3d_m": num(loo.ground_error_3d_m[i]),
-                "range_m": num(loo.range_m[i]),
-                "grazing_deg": num(loo.grazing_deg[i]),
-                "m_per_px": num(loo.m_per_px[i]),
-                "grazing": bool(loo.grazing[i]),
-                "loo_status": loo.status[i],
-            }
-            for i, name in enumerate(fit.names)
-        ],
-        "warnings": list(fit.warnings),
-    }
+        n = site.geoid_undulation_m if args.prior_vertical == "orthometric" else 0.0
+        try:
+            xyz = [
+                float(v) for v in site.frame.to_enu_from_crs(*vals[:3], crs, geoid_undulation_m=n)
+            ]
+        except DemtrackError as exc:
+            raise CalibrationError(f"--prior-position: {exc}") from None
+    return {n: (v, vals[3]) for n, v in zip(("x", "y", "z"), xyz, strict=True)}
 
 
 def _run_gcps(args: argparse.Namespace) -> int:
-    from demtrack.core.camera.gcp_calibration import fit_camera_to_gcps, leave_one_out, parse_free
-    from demtrack.core.camera.gcp_io import gcps_to_local, read_gcp_csv
+    import numpy as np
+
+    from demtrack.core.camera.gcp_calibration import fit_camera_to_gcps
+    from demtrack.core.camera.gcp_convert import read_gcps
+    from demtrack.core.camera.gcp_dem_check import check_gcps_inside_dem, check_gcps_on_dem
+    from demtrack.core.camera.gcp_io import gcps_to_local
+    from demtrack.core.camera.gcp_loo import leave_one_out
+    from demtrack.core.camera.gcp_model import parse_bounds, parse_free, parse_priors
+    from demtrack.core.errors import CalibrationError
     from demtrack.core.site.folder import load_site
     from demtrack.core.site.update import read_manifest, write_manifest
 
-    site = load_site(args.site)
-    sensor = site.sensor(args.sensor)
+    from .calibrate_report import gcp_json, print_gcp_report
+
     free = parse_free(args.free)
+    bounds = parse_bounds(args.bound or [])
+    priors = parse_priors(args.prior or [])
+    site = load_site(args.site)
+    for name, value in _prior_position(args, site).items():
+        if name in priors:
+            raise CalibrationError(f"--prior {name} and --prior-position both give {name}")
+        priors[name] = value
+    sensor = site.sensor(args.sensor)
     gcps = gcps_to_local(
-        read_gcp_csv(args.gcps),
+        read_gcps(args.gcps, args.gcp_format),
         site.frame,
         crs=args.gcp_crs,
         vertical=args.gcp_vertical,
         geoid_undulation_m=site.geoid_undulation_m,
     )
+    check_gcps_inside_dem(gcps, site.dem)
     start = sensor.camera
-    fit = fit_camera_to_gcps(
-        start,
-        gcps,
-        free,
+    options = dict(
         loss=args.loss,
         f_scale_px=args.f_scale,
         outlier_px=args.outlier_px,
         reject_outliers=not args.keep_outliers,
+        bounds=bounds,
+        priors=priors,
+        pixel_sigma_px=args.pixel_sigma,
         sensor_id=f"camera {sensor.id!r}",
     )
-    loo = leave_one_out(gcps, fit, site.dem, grazing_threshold_deg=args.grazing_deg)
+    fit = fit_camera_to_gcps(start, gcps, free, **options)  # type: ignore[arg-type]
+    dem = check_gcps_on_dem(fit.camera, gcps, site.dem, height_tol_m=args.height_tol)
+    if args.exclude_dem_flagged and dem.flagged.any():
+        flagged = np.array(dem.flagged)
+        fit = fit_camera_to_gcps(start, gcps, free, exclude=flagged, **options)  # type: ignore[arg-type]
+        dem = check_gcps_on_dem(fit.camera, gcps, site.dem, height_tol_m=args.height_tol)
+    loo = leave_one_out(
+        gcps, fit, site.dem, grazing_threshold_deg=args.grazing_deg, pixel_sigma_px=args.pixel_sigma
+    )
     written = False
     if not args.dry_run:
         fitted = _fitted_sensor(site, sensor, fit)
@@ -218,14 +189,34 @@ def _run_gcps(args: argparse.Namespace) -> int:
                 if fitted.roll_deg == 0.0:
                     new.pop("roll_deg", None)
                 entries[k] = new
-        write_manifest(args.site, doc)
+        write_manifest(args.site, doc)  # temporary file + os.replace
         written = True
     if args.json:
-        print(json.dumps(_gcp_json(sensor, fit, loo, written), indent=2))
+        print(json.dumps(gcp_json(sensor, fit, dem, loo, written), indent=2))
         return 0
-    _print_gcp_report(sensor, fit, loo, start)
     where = args.site / "site.json"
-    print(f"  {'written to ' + str(where) if written else 'dry run: site.json not changed'}")
+    print_gcp_report(
+        sensor,
+        fit,
+        dem,
+        loo,
+        f"written to {where}" if written else "dry run: site.json not changed",
+    )
+    return 0
+
+
+def _run_convert(args: argparse.Namespace) -> int:
+    from demtrack.core.camera.gcp_convert import convert_gcps, write_gcp_csv
+    from demtrack.core.errors import CalibrationError
+
+    if args.output.resolve() == args.input.resolve():
+        raise CalibrationError("-o must not be the input file")
+    gf = convert_gcps(
+        args.input, args.format, crs=args.crs, to_crs=args.to_crs, vertical=args.vertical
+    )
+    write_gcp_csv(args.output, gf)
+    shift = " (1-based pixels made 0-based: u, v minus 1)" if args.format == "imgraft" else ""
+    print(f"{args.output}: {len(gf.names)} GCPs, CRS {gf.crs}{shift}")
     return 0
 
 
@@ -234,20 +225,42 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("calibrate", help="fit a camera to ground control points")
     add_site_argument(p)
     p.add_argument("--sensor", required=True, metavar="ID")
-    p.add_argument("--gcps", required=True, metavar="FILE.csv", help="name,u,v,x,y,z (see docs)")
+    p.add_argument("--gcps", required=True, metavar="FILE", help="GCP file (see docs)")
+    p.add_argument(
+        "--gcp-format", choices=GCP_FORMATS, default="csv",
+        help="csv: name,u,v,x,y,z, 0-based pixels (default); imgraft: x y z u v, 1-based",
+    )  # fmt: skip
     p.add_argument("--gcp-crs", metavar="CRS", help="CRS of x,y,z ('local' = site frame)")
     p.add_argument("--gcp-vertical", choices=("ellipsoidal", "orthometric"), help="heights' datum")
     p.add_argument(
         "--free",
         default=",".join(DEFAULT_FREE),
         metavar="LIST",
-        help=f"parameters to fit, from {','.join(FREE_PARAMETERS)} (default yaw,tilt,roll)",
+        help=f"parameters to fit, from {','.join(FREE_PARAMETERS)} (default yaw,tilt,roll; "
+        "f ties fx and fy)",
     )
     p.add_argument(
-        "--loss",
-        default="soft_l1",
-        choices=("soft_l1", "huber", "cauchy", "arctan", "linear"),
-        help="robust loss (default soft_l1)",
+        "--bound", action="append", metavar="NAME=LO,HI",
+        help="bounds of a free parameter in its unit (repeatable)",
+    )  # fmt: skip
+    p.add_argument(
+        "--prior", action="append", metavar="NAME=VALUE,SIGMA",
+        help="prior on a free parameter, an extra residual (repeatable)",
+    )  # fmt: skip
+    p.add_argument(
+        "--prior-position", metavar="X,Y,Z,SIGMA",
+        help="surveyed optical centre and its 1-sigma (m): priors on x,y,z",
+    )  # fmt: skip
+    p.add_argument("--prior-crs", metavar="CRS", help="CRS of --prior-position (default local)")
+    p.add_argument(
+        "--prior-vertical", choices=("ellipsoidal", "orthometric"), help="its height's datum"
+    )
+    p.add_argument(
+        "--pixel-sigma", type=positive, default=1.0, metavar="PX",
+        help="pixel noise the priors are weighed against (default 1 px)",
+    )  # fmt: skip
+    p.add_argument(
+        "--loss", default="soft_l1", choices=GCP_LOSSES, help="robust loss (default soft_l1)"
     )
     p.add_argument("--f-scale", type=positive, default=1.0, metavar="PX", help="loss scale")
     p.add_argument(
@@ -255,11 +268,28 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--keep-outliers", action="store_true", help="flag but do not exclude")
     p.add_argument(
+        "--height-tol", type=positive, default=0.5, metavar="M",
+        help="GCP height vs DEM tolerance (default 0.5 m, at least 3 DEM sigma)",
+    )  # fmt: skip
+    p.add_argument(
+        "--exclude-dem-flagged", action="store_true",
+        help="also leave GCPs inconsistent with the DEM out of the fit",
+    )  # fmt: skip
+    p.add_argument(
         "--grazing-deg", type=non_negative, default=5.0, metavar="DEG", help="grazing-ray threshold"
     )
     p.add_argument("--dry-run", action="store_true", help="report only; leave site.json")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_run_gcps)
+
+    p = sub.add_parser("convert-gcps", help="ImGRAFT or CSV GCPs to demtrack's GCP CSV")
+    p.add_argument("input", type=Path, metavar="FILE")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="OUT.csv")
+    p.add_argument("--format", choices=GCP_FORMATS, required=True, help="input format")
+    p.add_argument("--crs", metavar="CRS", help="CRS of the input's x,y,z (ImGRAFT: required)")
+    p.add_argument("--to-crs", metavar="CRS", help="re-project x,y,z to this CRS")
+    p.add_argument("--vertical", choices=("ellipsoidal", "orthometric"), help="heights' datum")
+    p.set_defaults(func=_run_convert)
 
     p = sub.add_parser("calibrate-yaw", help="estimate a pan-tilt head's yaw from landmarks")
     add_site_argument(p)

@@ -14,6 +14,8 @@ __all__ = [
     "DEFAULT_FREE",
     "DEFAULT_METHOD",
     "FREE_PARAMETERS",
+    "GCP_FORMATS",
+    "GCP_LOSSES",
     "GEOLOCATE_RULES",
     "MANIFEST",
     "SCENARIO_DEFAULTS",
@@ -67,16 +69,11 @@ ACTIVITY_SEED = 0
 
 #: ``demtrack.core.camera.gcp_calibration.FREE_PARAMETERS`` and ``DEFAULT_FREE``.
 FREE_PARAMETERS: tuple[str, ...] = (
-    "yaw",
-    "tilt",
-    "roll",
-    "f",
-    "cx",
-    "cy",
-    "k1",
-    "k2",
-    "x",
-    "y",
-    "z",
-)
+    "yaw", "tilt", "roll", "f", "fx", "fy", "cx", "cy",
+    "k1", "k2", "k3", "p1", "p2", "x", "y", "z",
+)  # fmt: skip
+#: ``demtrack.core.camera.gcp_calibration.LOSSES``.
+GCP_LOSSES: tuple[str, ...] = ("linear", "soft_l1", "huber", "cauchy", "arctan")
+#: ``demtrack.core.camera.gcp_convert.GCP_FORMATS``.
+GCP_FORMATS: tuple[str, ...] = ("csv", "imgraft")
 DEFAULT_FREE: tuple[str, ...] = ("yaw", "tilt", "roll")

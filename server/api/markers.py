@@ -3,8 +3,9 @@
 ``GET`` lists them (reader), ``POST`` keeps one, ``PATCH /{id}`` renames or notes one and
 ``DELETE /{id}`` removes one (operator token); each change is streamed as a ``marker``
 message. ``GET /api/markers/export``
-writes them as GeoJSON (RFC 7946, ``[lon, lat, h]``, h above the WGS84 ellipsoid) or CSV
-(``longitude``/``latitude`` columns, which GDAL and QGIS detect).
+writes them as GeoJSON (RFC 7946, ``[lon, lat, h]``, h above the WGS84 ellipsoid), CSV
+(``longitude``/``latitude`` columns, which GDAL and QGIS detect), GPX waypoints or KML
+placemarks (heights above the geoid where the site has a geoid model).
 """
 
 from __future__ import annotations
@@ -138,17 +139,40 @@ _CSV_COLUMNS = (
 )
 
 
+_XML_MIME = {"gpx": "application/gpx+xml", "kml": "application/vnd.google-earth.kml+xml"}
+
+
 @router.get(
     "/export",
-    summary="Markers as GeoJSON or CSV",
+    summary="Markers as GeoJSON, CSV, GPX or KML",
     dependencies=READER,
     response_class=Response,
-    responses={200: {"content": {"application/geo+json": {}, "text/csv": {}}}},
+    responses={
+        200: {
+            "content": {
+                "application/geo+json": {},
+                "text/csv": {},
+                "application/gpx+xml": {},
+                "application/vnd.google-earth.kml+xml": {},
+            }
+        }
+    },
 )
 def export_markers(
-    state: StateDep, fmt: Literal["geojson", "csv"] = Query("geojson", alias="format")
+    state: StateDep,
+    fmt: Literal["geojson", "csv", "gpx", "kml"] = Query("geojson", alias="format"),
 ) -> Response:
-    """Every marker: GeoJSON (``[lon, lat, h]``, h above the WGS84 ellipsoid) or CSV."""
+    """Every marker as GeoJSON, CSV, GPX waypoints or KML placemarks.
+
+    GeoJSON ``[lon, lat, h]`` has h above the WGS84 ellipsoid; GPX ``<ele>`` and KML
+    ``absolute`` are above the geoid where the site has a geoid model, as the file says.
+    """
+    if fmt in _XML_MIME:
+        return Response(
+            markers.markers_document(state, fmt),
+            media_type=_XML_MIME[fmt],
+            headers={"Content-Disposition": f'attachment; filename="markers.{fmt}"'},
+        )
     if fmt == "geojson":
         import json
 

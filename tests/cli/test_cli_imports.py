@@ -44,7 +44,8 @@ def test_the_probe_sees_a_heavy_import():
 
 
 def test_copied_choices_match_their_owners():
-    from demtrack.core.camera.gcp_calibration import DEFAULT_FREE, FREE_PARAMETERS
+    from demtrack.core.camera.gcp_calibration import DEFAULT_FREE, FREE_PARAMETERS, LOSSES
+    from demtrack.core.camera.gcp_convert import GCP_FORMATS
     from demtrack.core.geolocation.geolocate import RULES
     from demtrack.core.site.folder import MANIFEST
     from demtrack.core.tracking import METHODS
@@ -63,6 +64,8 @@ def test_copied_choices_match_their_owners():
     assert choices.ACTIVITY_SEED == DEFAULT_ACTIVITY_PARAMS.seed
     assert choices.FREE_PARAMETERS == tuple(FREE_PARAMETERS)
     assert choices.DEFAULT_FREE == tuple(DEFAULT_FREE)
+    assert choices.GCP_LOSSES == tuple(LOSSES)
+    assert choices.GCP_FORMATS == tuple(GCP_FORMATS)
     defaults = dataclasses.asdict(ScenarioParams())
     assert choices.SCENARIO_DEFAULTS == {k: defaults[k] for k in choices.SCENARIO_DEFAULTS}
 

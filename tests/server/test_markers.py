@@ -9,13 +9,18 @@ from datetime import UTC, datetime
 
 import mgrs
 import numpy as np
+import pyogrio
+import pyogrio.raw
 import pytest
+import rasterio
+import shapely
 from fastapi.testclient import TestClient
 from pydantic import TypeAdapter
 from server_helpers import AUTH, TOKEN, make_app
 
 from demtrack.core.site.folder import load_site
 from demtrack.server.messages import ServerMessage
+from demtrack.server.site_info import geoid_grid_path
 from demtrack.server.store.database import SCHEMA_VERSION, Store
 
 pytestmark = pytest.mark.timeout(60)
@@ -150,7 +155,54 @@ def test_export_geojson_lon_lat_h_and_csv_columns(client):
     assert rows[0]["name"] == "bridge"
     assert float(rows[0]["longitude"]) == pytest.approx(m["lon_deg"])
     assert float(rows[0]["latitude"]) == pytest.approx(m["lat_deg"])
-    assert client.get("/api/markers/export?format=kml", headers=AUTH).status_code == 422
+    assert client.get("/api/markers/export?format=kmz", headers=AUTH).status_code == 422
+
+
+def _egm96_n(lat: float, lon: float) -> float:
+    """EGM96 undulation read straight from the grid file, bilinear (independent of PROJ)."""
+    grid = geoid_grid_path()
+    with rasterio.open(grid) as ds:
+        z = ds.read(1).astype(float)
+        col, row = ~ds.transform @ (lon % 360.0 if ds.bounds.left >= -1 else lon, lat)
+    c0, r0 = int(np.floor(col - 0.5)), int(np.floor(row - 0.5))
+    fc, fr = col - 0.5 - c0, row - 0.5 - r0
+    q = z[r0 : r0 + 2, c0 : c0 + 2]
+    return float(
+        q[0, 0] * (1 - fc) * (1 - fr)
+        + q[0, 1] * fc * (1 - fr)
+        + q[1, 0] * (1 - fc) * fr
+        + q[1, 1] * fc * fr
+    )
+
+
+@pytest.mark.skipif(geoid_grid_path() is None, reason="needs proj-data's egm96_15.gtx")
+@pytest.mark.parametrize("fmt", ["gpx", "kml"])
+def test_export_gpx_kml_heights_above_the_geoid_read_by_gdal(client, tmp_path, fmt):
+    m = client.post(
+        "/api/markers",
+        headers=AUTH,
+        json={"t_s": T0, "e_m": 10, "n_m": 20, "u_m": 5, "name": "bridge", "note": "north pier"},
+    ).json()
+    r = client.get(f"/api/markers/export?format={fmt}", headers=AUTH)
+    assert r.status_code == 200, r.text
+    path = tmp_path / f"markers.{fmt}"
+    path.write_bytes(r.content)
+    layer = "waypoints" if fmt == "gpx" else None
+    meta, _, geoms, fields = pyogrio.raw.read(path, layer=layer)
+    cols = dict(zip(meta["fields"], fields, strict=True))
+    (pt,) = shapely.from_wkb(geoms)
+    assert pt.x == pytest.approx(m["lon_deg"], abs=1e-8)
+    assert pt.y == pytest.approx(m["lat_deg"], abs=1e-8)
+    want = m["h_m"] - _egm96_n(m["lat_deg"], m["lon_deg"])
+    got = float(cols["ele"][0]) if fmt == "gpx" else pt.z
+    assert got == pytest.approx(want, abs=0.01)  # metres above the geoid, not the ellipsoid
+    assert abs(want - m["h_m"]) > 20  # Bushy Run: N is about -34 m
+    assert "above sea level" in r.text and "EGM96" in r.text
+    when = cols["time"][0] if fmt == "gpx" else cols["timestamp"][0]
+    got_t = datetime.fromisoformat(str(when).replace("Z", "+00:00").replace("/", "-"))
+    if got_t.tzinfo is None:
+        got_t = got_t.replace(tzinfo=UTC)
+    assert got_t == datetime.fromisoformat(m["time_utc"].replace("Z", "+00:00"))
 
 
 def test_rename_and_note_are_stored_and_streamed(client):

@@ -152,6 +152,7 @@ def test_each_activity_kind_is_drawn_as_itself(activity_server, page):
         timeout_s=30,
         page=page,
     )
+
     # the selected episode is drawn in the selection colour with its tracks' paths
     def _drawn(roles: list) -> list | None:
         return roles if "link" in roles and roles.count("path") == 2 else None
@@ -163,11 +164,14 @@ def test_each_activity_kind_is_drawn_as_itself(activity_server, page):
         )
 
     # the layer redraws on the page's next frame after the click: wait for it
-    roles = wait_until(
-        lambda: _drawn(selected_roles()),
-        timeout_s=30,
-        page=page,
-    ) or selected_roles()
+    roles = (
+        wait_until(
+            lambda: _drawn(selected_roles()),
+            timeout_s=30,
+            page=page,
+        )
+        or selected_roles()
+    )
     assert "link" in roles and roles.count("path") == 2
     page.evaluate(
         "(() => { const m = window.demtrack.map; const s = m.map.getLayers().getArray()"

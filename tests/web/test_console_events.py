@@ -12,6 +12,7 @@ time page by page, obeys the track filter and its own kind chips, and no row is 
 from __future__ import annotations
 
 from datetime import UTC, datetime
+from urllib.parse import parse_qs, urlparse
 
 import pytest
 from web_helpers import SHOTS, open_console, post_until, wait_until
@@ -88,8 +89,16 @@ def test_event_list_is_a_review_tool(page, browser, server_factory, records):
     want = sorted(happened, key=lambda e: e["t_start_s"])
     ctx = browser.new_context(viewport={"width": 1280, "height": 800})
     late = ctx.new_page()
+    asked: list[str] = []
+    late.on("request", lambda r: "/api/events" in r.url and asked.append(r.url))
     try:
         open_console(late, srv)  # this one loads them from /api/events
+        # start-up asks for the newest ten minutes, not the first page of a long session
+        with srv.client() as c:
+            tracks = c.get("/api/tracks").json()["tracks"]
+        t_last = max(float(p["t_s"]) for t in tracks for p in t["points"])
+        first = parse_qs(urlparse(next(u for u in asked if "kind=" not in u)).query)
+        assert abs(float(first["t_from"][0]) - (t_last - 600.0)) < 1.0, first
         for pg in (page, late):
             _all_rows(pg)
             pg.evaluate(f"window.demtrack.timeline.seek({UNTIL_S + 10})")

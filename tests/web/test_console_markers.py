@@ -73,6 +73,15 @@ def test_markers_are_shared_stored_and_removed_for_everyone(page, browser, serve
         )
         assert on_map == [[m["e_m"], m["n_m"]]]
         other.screenshot(path=str(SHOTS / "markers_other_console.png"))
+        # Export markers saves the server's file, byte for byte (GPX: heights above the geoid)
+        other.select_option("#export-format", "gpx")
+        with other.expect_download() as info:
+            other.locator("#export-markers").click()
+        dl = info.value
+        assert dl.suggested_filename == "demtrack-markers.gpx"
+        with srv.client() as c:
+            want = c.get("/api/markers/export?format=gpx").content
+        assert open(dl.path(), "rb").read() == want and b"<wpt" in want
         # a reload lists it again (from the server)
         page.reload()
         page.wait_for_selector("body[data-ready='1']")

@@ -122,7 +122,7 @@ export function wireControls() {
   $("#syn-on").addEventListener("change", () => (ui.dirty = true));
   $("#syn-window").addEventListener("change", () => (ui.dirty = true));
   $("#export-tracks").addEventListener("click", () => downloadTracks($("#export-format").value, selectionTracks()));
-  $("#export-markers").addEventListener("click", () => downloadMarkers($("#export-format").value, ui.markers));
+  $("#export-markers").addEventListener("click", () => downloadMarkers($("#export-format").value));
   $("#tab-map").addEventListener("click", () => showTab("map"));
   $("#tab-3d").addEventListener("click", () => showTab("3d"));
   ui.follow3d.register().catch(() => {}); // at once: the 3D tab then loads without waiting

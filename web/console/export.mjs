@@ -8,53 +8,12 @@
 // <time> and <ele> per point; KML/KMZ: a gx:Track per run (absolute altitudes);
 // GeoPackage: layers tracks and track_points with a spatial index. See docs/server.md.
 //
-// Markers live only in this page (no server store yet), so they are still written here:
-// GeoJSON [lon, lat, h] (h above the ellipsoid), CSV, GPX and KML waypoints.
+// Markers are stored by the server and written by it too, `GET /api/markers/export`:
+// GeoJSON [lon, lat, h] (h above the ellipsoid), CSV, GPX waypoints and KML placemarks
+// (<ele> / absolute altitudes above the geoid where the site has a geoid model).
 
 import { AuthError, token } from "./api.mjs";
-import { download, escapeXml } from "./util.mjs";
-
-// ------------------------------------------------------------------------- markers
-export function markersGeoJSON(markers) {
-  return {
-    type: "FeatureCollection",
-    features: markers.map((m) => ({
-      type: "Feature",
-      id: m.id,
-      properties: { name: m.name, sensor: m.sensor, pixel: m.pixel, rule: m.rule, e_m: m.e_m, n_m: m.n_m, u_m: m.u_m, range_m: m.range_m, sigma_m: m.sigma_m },
-      geometry: { type: "Point", coordinates: [m.lon_deg, m.lat_deg, m.h_m] },
-    })),
-  };
-}
-
-export function markersCSV(markers) {
-  const rows = ["name,sensor,u_px,v_px,rule,e_m,n_m,u_m,lat_deg,lon_deg,h_m,range_m,sigma_m"];
-  for (const m of markers) {
-    rows.push([m.name, m.sensor, m.pixel[0], m.pixel[1], m.rule, m.e_m.toFixed(3), m.n_m.toFixed(3), m.u_m.toFixed(3),
-      m.lat_deg.toFixed(9), m.lon_deg.toFixed(9), m.h_m.toFixed(3), m.range_m.toFixed(2), m.sigma_m.toFixed(2)].join(","));
-  }
-  return rows.join("\n") + "\n";
-}
-
-export function markersGPX(markers) {
-  const out = ['<?xml version="1.0" encoding="UTF-8"?>',
-    '<gpx version="1.1" creator="demtrack console" xmlns="http://www.topografix.com/GPX/1/1">'];
-  for (const m of markers) {
-    out.push(`<wpt lat="${m.lat_deg.toFixed(9)}" lon="${m.lon_deg.toFixed(9)}"><ele>${m.h_m.toFixed(3)}</ele><name>${escapeXml(m.name)}</name><desc>${escapeXml(`${m.sensor} pixel ${m.pixel[0]},${m.pixel[1]} rule ${m.rule}`)}</desc></wpt>`);
-  }
-  out.push("</gpx>");
-  return out.join("\n") + "\n";
-}
-
-export function markersKML(markers) {
-  const out = ['<?xml version="1.0" encoding="UTF-8"?>',
-    '<kml xmlns="http://www.opengis.net/kml/2.2"><Document><name>demtrack markers</name>'];
-  for (const m of markers) {
-    out.push(`<Placemark><name>${escapeXml(m.name)}</name><Point><altitudeMode>absolute</altitudeMode><coordinates>${m.lon_deg.toFixed(9)},${m.lat_deg.toFixed(9)},${m.h_m.toFixed(3)}</coordinates></Point></Placemark>`);
-  }
-  out.push("</Document></kml>");
-  return out.join("\n") + "\n";
-}
+import { download } from "./util.mjs";
 
 /** Track formats the server writes: value -> file extension. */
 export const FORMATS = {
@@ -65,7 +24,7 @@ export const FORMATS = {
   kmz: { ext: "kmz" },
   gpkg: { ext: "gpkg" },
 };
-/** Formats the page can write markers in. */
+/** Formats the server writes markers in (GET /api/markers/export). */
 export const MARKER_FORMATS = ["geojson", "csv", "gpx", "kml"];
 
 /** The export URL of `tracks` (page track objects, possibly clipped to a window). */
@@ -85,12 +44,11 @@ export function tracksExportURL(format, tracks, { clipped = false } = {}) {
   return `/api/tracks/export?${q}`;
 }
 
-/** The server's file for the tracks: {blob, name}. */
-export async function fetchTracksExport(format, tracks, opts = {}) {
+/** The server's file at `url` (an export endpoint): {blob, name}. */
+async function fetchExport(url, name) {
   const h = {};
   const t = token();
   if (t) h.Authorization = `Bearer ${t}`;
-  const url = tracksExportURL(format, tracks, opts);
   const resp = await fetch(url, { headers: h });
   if (resp.status === 401) throw new AuthError("operator token required or wrong");
   if (!resp.ok) {
@@ -102,16 +60,19 @@ export async function fetchTracksExport(format, tracks, opts = {}) {
     }
     throw new Error(`export: ${resp.status} ${detail}`);
   }
-  return { blob: await resp.blob(), name: `demtrack-tracks.${FORMATS[format].ext}` };
+  return { blob: await resp.blob(), name };
 }
 
-/** Saves the tracks, as the server writes them, as `demtrack-tracks.<ext>`. */
-export async function downloadTracks(format, tracks) {
-  const clipped = !!document.querySelector("#syn-on")?.checked;
-  const button = document.querySelector("#export-tracks");
+/** The server's file for the tracks: {blob, name}. */
+export function fetchTracksExport(format, tracks, opts = {}) {
+  return fetchExport(tracksExportURL(format, tracks, opts), `demtrack-tracks.${FORMATS[format].ext}`);
+}
+
+/** Saves the server's file for `what` ("tracks" or "markers"), marking the button's state. */
+async function save(button, fetching) {
   if (button) button.dataset.state = "busy";
   try {
-    const { blob, name } = await fetchTracksExport(format, tracks, { clipped });
+    const { blob, name } = await fetching();
     download(name, blob.type || "application/octet-stream", blob);
     if (button) button.dataset.state = "done";
   } catch (err) {
@@ -119,28 +80,20 @@ export async function downloadTracks(format, tracks) {
       button.dataset.state = "error";
       button.title = String(err.message || err);
     }
-    console.warn(`track export failed: ${err.message || err}`);
+    console.warn(`export failed: ${err.message || err}`);
   }
 }
 
-export function renderMarkers(format, markers) {
-  if (format === "geojson") return JSON.stringify(markersGeoJSON(markers), null, 1);
-  if (format === "csv") return markersCSV(markers);
-  if (format === "gpx") return markersGPX(markers);
-  if (format === "kml") return markersKML(markers);
-  throw new Error(`markers cannot be written as ${format} in the page (use GeoJSON, CSV, GPX or KML)`);
+/** Saves the tracks, as the server writes them, as `demtrack-tracks.<ext>`. */
+export function downloadTracks(format, tracks) {
+  const clipped = !!document.querySelector("#syn-on")?.checked;
+  return save(document.querySelector("#export-tracks"), () => fetchTracksExport(format, tracks, { clipped }));
 }
 
-const MARKER_MIME = {
-  geojson: "application/geo+json",
-  csv: "text/csv",
-  gpx: "application/gpx+xml",
-  kml: "application/vnd.google-earth.kml+xml",
-};
-
-/** Saves the markers as a file in the format (`demtrack-markers.<ext>`); GeoJSON when the
- * chosen format is one only the server writes (KMZ, GeoPackage). */
-export function downloadMarkers(format, markers) {
+/** Saves every stored marker as the server writes them (`demtrack-markers.<ext>`); GeoJSON
+ * when the chosen format is a track-only one (KMZ, GeoPackage). */
+export function downloadMarkers(format) {
   const f = MARKER_FORMATS.includes(format) ? format : "geojson";
-  download(`demtrack-markers.${f}`, MARKER_MIME[f], renderMarkers(f, markers));
+  return save(document.querySelector("#export-markers"),
+    () => fetchExport(`/api/markers/export?format=${f}`, `demtrack-markers.${f}`));
 }

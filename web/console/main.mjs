@@ -90,8 +90,13 @@ async function boot() {
   const tracks = api.getJSON("/api/tracks")
     .then((r) => r.tracks.forEach((t) => store.applyTrack(t)))
     .then(() => recentDetections().catch(() => {}));
+  // The events of the newest ten minutes (a long session's first 1000 would be its oldest);
+  // the event list asks for any other moment's when it is shown (lists.mjs).
   const events = ui.endpoints.events
-    ? api.getOptionalJSON("/api/events").then((r) => {
+    ? tracks.catch(() => {}).then(() => {
+      const q = store.tMax === null ? "?limit=2000" : `?t_from=${store.tMax - 600}&limit=2000`;
+      return api.getOptionalJSON(`/api/events${q}`);
+    }).then((r) => {
       const list = Array.isArray(r) ? r : r?.events;
       for (const e of list || []) store.applyEvent(normEvent({ kind: e.kind, t_s: e.t_start_s, event: e }));
     }).catch(() => {})

@@ -46,6 +46,3 @@ export function download(name, mime, text) {
   }, 1000);
 }
 
-export function escapeXml(s) {
-  return String(s).replace(/[<>&'"]/g, (c) => ({ "<": "&lt;", ">": "&gt;", "&": "&amp;", "'": "&apos;", '"': "&quot;" })[c]);
-}

@@ -13,12 +13,9 @@ import numpy as np
 import pytest
 from pyproj import Transformer
 
-from demtrack.core.camera.gcp_calibration import (
-    fit_camera_to_gcps,
-    leave_one_out,
-    parse_free,
-)
+from demtrack.core.camera.gcp_calibration import fit_camera_to_gcps, parse_free
 from demtrack.core.camera.gcp_io import Gcp, gcps_to_local, read_gcp_csv
+from demtrack.core.camera.gcp_loo import leave_one_out
 from demtrack.core.camera.pinhole import Camera, Intrinsics
 from demtrack.core.errors import CalibrationError, InputFileError
 from demtrack.core.geo.geodesy import LocalFrame
