@@ -159,14 +159,23 @@ class Intrinsics:
             self._check_invertible()
 
     @property
-    def coeffs(self) -> tuple[float, float, float, float, float, float]:
-        """Distortion coefficients ``(k1, k2, p1, p2, k3, k4)``: OpenCV's order, then ``r^8``."""
+    def coeffs(self) -> tuple[float, float, float, float, float]:
+        """OpenCV's five distortion coefficients ``(k1, k2, p1, p2, k3)``.
+
+        What ``cv2`` takes as ``distCoeffs``. It leaves out ``k4`` (OpenCV has no
+        polynomial ``r^8`` term); the lens functions take :attr:`lens_coeffs`.
+        """
+        return (self.k1, self.k2, self.p1, self.p2, self.k3)
+
+    @property
+    def lens_coeffs(self) -> tuple[float, float, float, float, float, float]:
+        """All six coefficients ``(k1, k2, p1, p2, k3, k4)``, as ``core.camera.lens`` takes them."""
         return (self.k1, self.k2, self.p1, self.p2, self.k3, self.k4)
 
     @property
     def has_distortion(self) -> bool:
         """True if any distortion coefficient is non-zero."""
-        return any(c != 0.0 for c in self.coeffs)
+        return any(c != 0.0 for c in self.lens_coeffs)
 
     @property
     def K(self) -> np.ndarray:  # noqa: N802 - the calibration matrix is K everywhere
@@ -199,18 +208,21 @@ class Intrinsics:
         uu, vv = np.meshgrid(gu, gv)
         # The numpy twin: no compilation just to build an Intrinsics.
         xn, yn = undistort_normalized(
-            (uu - self.cx) / self.fx, (vv - self.cy) / self.fy, *self.coeffs, r_max=self.fold_radius
+            (uu - self.cx) / self.fx,
+            (vv - self.cy) / self.fy,
+            *self.lens_coeffs,
+            r_max=self.fold_radius,
         )
         if not (np.isfinite(xn).all() and np.isfinite(yn).all()):
             raise CameraError(
                 "distortion is not invertible within the image: some pixels "
-                f"have no undistorted preimage (coefficients {self.coeffs})"
+                f"have no undistorted preimage (coefficients {self.lens_coeffs})"
             )
-        a, b, c, d = distortion_jacobian(xn, yn, *self.coeffs)
+        a, b, c, d = distortion_jacobian(xn, yn, *self.lens_coeffs)
         if not (a * d - b * c > 0.0).all():
             raise CameraError(
                 "distortion is not invertible within the image: its Jacobian "
-                f"is singular or reflecting (coefficients {self.coeffs})"
+                f"is singular or reflecting (coefficients {self.lens_coeffs})"
             )
 
     def distort(self, xn: ArrayLike, yn: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -228,7 +240,7 @@ class Intrinsics:
         """
         xn = np.asarray(xn, dtype=np.float64)
         yn = np.asarray(yn, dtype=np.float64)
-        xd, yd = distort_normalized(xn, yn, *self.coeffs)
+        xd, yd = distort_normalized(xn, yn, *self.lens_coeffs)
         u = self.fx * xd + self.cx
         v = self.fy * yd + self.cy
         if math.isfinite(self.fold_radius):
@@ -252,7 +264,7 @@ class Intrinsics:
         """
         xd = (np.asarray(u, dtype=np.float64) - self.cx) / self.fx
         yd = (np.asarray(v, dtype=np.float64) - self.cy) / self.fy
-        return undistort_normalized_nb(xd, yd, *self.coeffs, r_max=self.fold_radius)
+        return undistort_normalized_nb(xd, yd, *self.lens_coeffs, r_max=self.fold_radius)
 
     def in_image(self, u: ArrayLike, v: ArrayLike) -> np.ndarray:
         """Flag pixels on the image, edges included (NaN counts as outside)."""

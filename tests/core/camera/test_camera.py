@@ -141,19 +141,27 @@ def test_distortion_matches_opencv_formula_and_jacobian():
     rng = np.random.default_rng(0)
     x, y = rng.uniform(-1.2, 1.2, (2, 500))
     for intr in LENSES:
-        xd, yd = distort_normalized(x, y, *intr.coeffs)
-        ex, ey = opencv_formula(x, y, *intr.coeffs)
+        xd, yd = distort_normalized(x, y, *intr.lens_coeffs)
+        ex, ey = opencv_formula(x, y, *intr.lens_coeffs)
         np.testing.assert_allclose(xd, ex, rtol=0, atol=1e-14)
         np.testing.assert_allclose(yd, ey, rtol=0, atol=1e-14)
         h = 1e-6
-        jac = distortion_jacobian(x, y, *intr.coeffs)
+        jac = distortion_jacobian(x, y, *intr.lens_coeffs)
         fd = [
-            (np.subtract(*[distort_normalized(x + s * h, y, *intr.coeffs)[i] for s in (1, -1)]))
+            (
+                np.subtract(
+                    *[distort_normalized(x + s * h, y, *intr.lens_coeffs)[i] for s in (1, -1)]
+                )
+            )
             / (2 * h)
             for i in (0, 1)
         ]
         fdy = [
-            (np.subtract(*[distort_normalized(x, y + s * h, *intr.coeffs)[i] for s in (1, -1)]))
+            (
+                np.subtract(
+                    *[distort_normalized(x, y + s * h, *intr.lens_coeffs)[i] for s in (1, -1)]
+                )
+            )
             / (2 * h)
             for i in (0, 1)
         ]
@@ -211,8 +219,8 @@ def test_compiled_undistort_matches_numpy_twin():
         v = rng.uniform(-3 * H, 4 * H, 3000)
         u[:3], v[:3] = np.nan, 0.0
         xd, yd = (u - intr.cx) / intr.fx, (v - intr.cy) / intr.fy
-        a = undistort_normalized(xd, yd, *intr.coeffs, r_max=intr.fold_radius)
-        b = undistort_normalized_nb(xd, yd, *intr.coeffs, r_max=intr.fold_radius)
+        a = undistort_normalized(xd, yd, *intr.lens_coeffs, r_max=intr.fold_radius)
+        b = undistort_normalized_nb(xd, yd, *intr.lens_coeffs, r_max=intr.fold_radius)
         for p, q in zip(a, b, strict=True):
             np.testing.assert_array_equal(np.isnan(p), np.isnan(q))
             np.testing.assert_allclose(p, q, rtol=0, atol=1e-12)
@@ -419,6 +427,8 @@ def test_to_dict_round_trips_through_json():
     assert "k4" not in WILD.to_dict()
     assert ARIEL.to_dict()["k4"] == 0.006022
     assert Intrinsics.from_dict(json.loads(json.dumps(ARIEL.to_dict()))) == ARIEL
+    # coeffs stays OpenCV's five (cv2's distCoeffs); the lens takes all six.
+    assert len(ARIEL.coeffs) == 5 and ARIEL.lens_coeffs[5] == 0.006022
 
 
 def test_from_dict_accepts_orientation_angles():
