@@ -60,8 +60,25 @@ __all__ = [
     "site_hits_in_dem_crs",
 ]
 
-DATA_DIR = Path(os.environ.get("DEMTRACK_WEITSICHT_DATA", "/work/shared/data/weitsicht"))
-EGM96_GRID = Path("/usr/share/proj/egm96_15.gtx")
+
+def _data_dir() -> Path:
+    """``$DEMTRACK_WEITSICHT_DATA``, else ``../shared/data/weitsicht`` beside the checkout."""
+    if os.environ.get("DEMTRACK_WEITSICHT_DATA"):
+        return Path(os.environ["DEMTRACK_WEITSICHT_DATA"])
+    for d in (Path(__file__).resolve().parents[3] / "shared", Path("/work/shared")):
+        if (d / "data" / "weitsicht" / "cases.json").is_file():
+            return d / "data" / "weitsicht"
+    return Path("/work/shared/data/weitsicht")
+
+
+def _egm96_grid() -> Path:
+    from demtrack.server.site_info import geoid_grid_path
+
+    return geoid_grid_path() or Path("/usr/share/proj/egm96_15.gtx")
+
+
+DATA_DIR = _data_dir()
+EGM96_GRID = _egm96_grid()
 T_MAX_M = 2000.0  # longer than every ray here (the cameras fly 120-960 m above ground)
 
 # CRSs of the DEMs, horizontal part (the heights are orthometric: AHD, GHA).
