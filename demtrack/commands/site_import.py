@@ -329,9 +329,12 @@ def _run_add_camera(args: argparse.Namespace) -> int:
         f"lon {pose.lon_deg:.8f} h {pose.h_m:.3f} m ellipsoidal)"
     )
     if args.az is None:
-        axes = "grid axes" if pose.convergence_deg != 0.0 or args.north != "true" else "true ENU"
+        from demtrack.core.geo.geodesy import horizontal_crs
+
+        grid = args.north == "grid" or (args.north is None and horizontal_crs(crs).is_projected)
+        axes = "the CRS's grid axes" if grid else "east, true north, up at the camera"
         ref = (
-            f"rotation in the CRS's {axes} (convergence {pose.convergence_deg:+.4f} deg); "
+            f"rotation in {axes} (convergence {pose.convergence_deg:+.4f} deg); "
             f"optical axis at true azimuth {pose.az_true_deg:.4f} deg"
         )
     elif args.north == "grid":
