@@ -26,6 +26,7 @@ def _undistort_kernel(
     p1: float,
     p2: float,
     k3: float,
+    k4: float,
     r2_max: float,
     out_x: np.ndarray,
     out_y: np.ndarray,
@@ -46,13 +47,13 @@ def _undistort_kernel(
         tol_e = 1e-15 * (1.0 + math.sqrt(tx * tx + ty * ty))
         for _ in range(_MAX_NEWTON_ITER):
             r2 = x * x + y * y
-            g = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            g = 1.0 + r2 * (k1 + r2 * (k2 + r2 * (k3 + r2 * k4)))
             ex = x * g + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - tx
             ey = y * g + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - ty
             e0 = ex * ex + ey * ey
             if e0 <= tol_e * tol_e:
                 break
-            dg = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
+            dg = k1 + r2 * (2.0 * k2 + r2 * (3.0 * k3 + 4.0 * k4 * r2))
             off = 2.0 * x * y * dg + 2.0 * p1 * x + 2.0 * p2 * y
             a = g + 2.0 * x * x * dg + 2.0 * p1 * y + 6.0 * p2 * x
             d = g + 2.0 * y * y * dg + 6.0 * p1 * y + 2.0 * p2 * x
@@ -68,7 +69,7 @@ def _undistort_kernel(
                 xn = x - step * dx
                 yn = y - step * dy
                 r2n = xn * xn + yn * yn
-                gn = 1.0 + r2n * (k1 + r2n * (k2 + r2n * k3))
+                gn = 1.0 + r2n * (k1 + r2n * (k2 + r2n * (k3 + r2n * k4)))
                 fx = xn * gn + 2.0 * p1 * xn * yn + p2 * (r2n + 2.0 * xn * xn) - tx
                 fy = yn * gn + p1 * (r2n + 2.0 * yn * yn) + 2.0 * p2 * xn * yn - ty
                 if r2n < r2_max and fx * fx + fy * fy <= e0:
@@ -83,7 +84,7 @@ def _undistort_kernel(
             if done:
                 break
         r2 = x * x + y * y
-        g = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        g = 1.0 + r2 * (k1 + r2 * (k2 + r2 * (k3 + r2 * k4)))
         ex = x * g + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - tx
         ey = y * g + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - ty
         tol_r = 1e-12 * (1.0 + math.sqrt(tx * tx + ty * ty))

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
@@ -187,7 +187,7 @@ def check_gcps_in_front(camera: Camera, gcps: Sequence[Gcp], sensor_id: str = "c
 def _residuals(
     theta: np.ndarray, model: FitModel, p_enu: np.ndarray, uv: np.ndarray, pixel_sigma_px: float
 ) -> np.ndarray:
-    r = project(theta, p_enu, model.fy_ratio) - uv
+    r = project(theta, p_enu, model.fy_ratio, model.k4) - uv
     r = np.where(np.isfinite(r), r, _BEHIND_PX).ravel()
     if model.n_priors:
         r = np.concatenate([r, model.prior_residuals(theta, pixel_sigma_px)])
@@ -325,7 +325,7 @@ def fit_camera_to_gcps(
     if loss not in LOSSES:
         raise CalibrationError(f"unknown loss {loss!r}; choose from {','.join(LOSSES)}")
     theta0 = params_of(camera)
-    model = FitModel.build(tuple(free), theta0, bounds, priors)
+    model = replace(FitModel.build(tuple(free), theta0, bounds, priors), k4=camera.intrinsics.k4)
     free = model.free
     k, p = len(gcps), len(free)
     given_out = np.zeros(k, bool) if exclude is None else np.asarray(exclude, bool).copy()
@@ -342,7 +342,7 @@ def fit_camera_to_gcps(
     uv = np.array([[g.u, g.v] for g in gcps], dtype=np.float64)
 
     def cost(theta: np.ndarray) -> float:
-        r = project(theta, p_enu[~given_out], model.fy_ratio) - uv[~given_out]
+        r = project(theta, p_enu[~given_out], model.fy_ratio, model.k4) - uv[~given_out]
         return float(np.sum(np.minimum(np.nan_to_num(r, nan=_BEHIND_PX) ** 2, _BEHIND_PX)))
 
     angles = _kabsch_start(camera, [g for g, o in zip(gcps, given_out, strict=True) if not o])
@@ -363,7 +363,7 @@ def fit_camera_to_gcps(
     threshold = float("nan")
     outliers = np.zeros(k, dtype=bool)
     for _ in range(max(1, k)):
-        r = project(theta, p_enu, model.fy_ratio) - uv
+        r = project(theta, p_enu, model.fy_ratio, model.k4) - uv
         norms = np.hypot(r[:, 0], r[:, 1])
         norms = np.where(np.isfinite(norms), norms, np.inf)
         if outlier_px is not None:
@@ -383,7 +383,7 @@ def fit_camera_to_gcps(
         theta, sol = solve(inl, theta)
 
     fitted = camera_of(theta, camera.intrinsics, model.fy_ratio)
-    resid = project(theta, p_enu, model.fy_ratio) - uv
+    resid = project(theta, p_enu, model.fy_ratio, model.k4) - uv
     drop_outliers = reject_outliers and 2 * int((~outliers & ~given_out).sum()) + model.n_priors > p
     used = ~given_out & (~outliers if drop_outliers else True)
     norms = np.hypot(resid[:, 0], resid[:, 1])

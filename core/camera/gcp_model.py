@@ -153,10 +153,13 @@ def params_of(camera: Camera) -> np.ndarray:
     )  # fmt: skip
 
 
-def project(theta: np.ndarray, p_enu: np.ndarray, fy_ratio: float | None) -> np.ndarray:
+def project(
+    theta: np.ndarray, p_enu: np.ndarray, fy_ratio: float | None, k4: float = 0.0
+) -> np.ndarray:
     """Pixels ``(n, 2)`` of site-frame points ``(n, 3)``; NaN behind the camera.
 
     ``fy_ratio``: when not None, ``fy = fx * fy_ratio`` (``f`` free) instead of ``theta``'s.
+    ``k4``: the lens's fixed ``r^8`` radial term (never freed; kept as the camera has it).
     """
     az, tilt, roll, fx, fy, cx, cy, k1, k2, k3, p1, p2 = theta[:12]
     if fy_ratio is not None:
@@ -167,7 +170,7 @@ def project(theta: np.ndarray, p_enu: np.ndarray, fy_ratio: float | None) -> np.
     with np.errstate(divide="ignore", invalid="ignore"):
         xn = np.where(z > 0, p_cam[:, 0] / z, np.nan)
         yn = np.where(z > 0, p_cam[:, 1] / z, np.nan)
-    xd, yd = distort_normalized(xn, yn, k1, k2, p1, p2, k3)
+    xd, yd = distort_normalized(xn, yn, k1, k2, p1, p2, k3, k4)
     return np.column_stack([fx * xd + cx, fy * yd + cy])
 
 
@@ -183,7 +186,7 @@ def camera_of(theta: np.ndarray, base: Intrinsics, fy_ratio: float | None) -> Ca
     if fy_ratio is not None:
         fy = fx * fy_ratio
     try:
-        intr = Intrinsics(fx, fy, cx, cy, base.width, base.height, k1, k2, p1, p2, k3)
+        intr = Intrinsics(fx, fy, cx, cy, base.width, base.height, k1, k2, p1, p2, k3, base.k4)
     except CameraError as exc:
         raise CalibrationError(
             f"the fitted lens model is unusable ({exc}); free fewer distortion terms"
@@ -219,6 +222,7 @@ class FitModel:
     prior_index: np.ndarray
     prior_value: np.ndarray
     prior_sigma: np.ndarray
+    k4: float = 0.0
 
     @classmethod
     def build(

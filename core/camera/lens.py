@@ -1,9 +1,11 @@
 """OpenCV's lens-distortion model on normalised image coordinates: distort, undistort.
 
 OpenCV's radial (``k1, k2, k3``) and tangential (``p1, p2``) distortion of
-the ideal normalised coordinates ``(xn, yn) = (x/z, y/z)``::
+the ideal normalised coordinates ``(xn, yn) = (x/z, y/z)``, with one more radial term,
+``k4`` on ``r^8`` (the polynomial Brown model of Agisoft Metashape and weitsicht; **not**
+OpenCV's rational ``k4``, which divides; 0 gives OpenCV's five-coefficient model)::
 
-    r2 = xn^2 + yn^2,   g = 1 + k1 r2 + k2 r2^2 + k3 r2^3
+    r2 = xn^2 + yn^2,   g = 1 + k1 r2 + k2 r2^2 + k3 r2^3 + k4 r2^4
     xd = xn g + 2 p1 xn yn + p2 (r2 + 2 xn^2)
     yd = yn g + p1 (r2 + 2 yn^2) + 2 p2 xn yn
     u = fx xd + cx,     v = fy yd + cy
@@ -45,7 +47,14 @@ _R_FOLD_MAX = 1e4
 
 
 def distort_normalized(
-    xn: np.ndarray, yn: np.ndarray, k1: float, k2: float, p1: float, p2: float, k3: float
+    xn: np.ndarray,
+    yn: np.ndarray,
+    k1: float,
+    k2: float,
+    p1: float,
+    p2: float,
+    k3: float,
+    k4: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Apply OpenCV distortion to ideal normalised coordinates.
 
@@ -55,6 +64,8 @@ def distort_normalized(
         Ideal (undistorted) normalised image coordinates ``x/z, y/z`` (camera frame).
     k1, k2, p1, p2, k3 : float
         OpenCV distortion coefficients.
+    k4 : float
+        Radial coefficient of ``r^8`` (polynomial, not OpenCV's rational ``k4``).
 
     Returns
     -------
@@ -62,7 +73,7 @@ def distort_normalized(
         Distorted normalised coordinates, same shape as the broadcast inputs.
     """
     r2 = xn * xn + yn * yn
-    g = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    g = 1.0 + r2 * (k1 + r2 * (k2 + r2 * (k3 + r2 * k4)))
     xy = xn * yn
     xd = xn * g + 2.0 * p1 * xy + p2 * (r2 + 2.0 * xn * xn)
     yd = yn * g + p1 * (r2 + 2.0 * yn * yn) + 2.0 * p2 * xy
@@ -70,7 +81,14 @@ def distort_normalized(
 
 
 def distortion_jacobian(
-    xn: np.ndarray, yn: np.ndarray, k1: float, k2: float, p1: float, p2: float, k3: float
+    xn: np.ndarray,
+    yn: np.ndarray,
+    k1: float,
+    k2: float,
+    p1: float,
+    p2: float,
+    k3: float,
+    k4: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Jacobian of :func:`distort_normalized`.
 
@@ -80,32 +98,33 @@ def distortion_jacobian(
         Partial derivatives (the two off-diagonal terms are equal for this model).
     """
     r2 = xn * xn + yn * yn
-    g = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    dg = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)  # dg / d(r2)
+    g = 1.0 + r2 * (k1 + r2 * (k2 + r2 * (k3 + r2 * k4)))
+    dg = k1 + r2 * (2.0 * k2 + r2 * (3.0 * k3 + 4.0 * k4 * r2))  # dg / d(r2)
     off = 2.0 * xn * yn * dg + 2.0 * p1 * xn + 2.0 * p2 * yn
     a = g + 2.0 * xn * xn * dg + 2.0 * p1 * yn + 6.0 * p2 * xn
     d = g + 2.0 * yn * yn * dg + 6.0 * p1 * yn + 2.0 * p2 * xn
     return a, off, off, d
 
 
-def radial_fold_radius(k1: float, k2: float, k3: float) -> float:
+def radial_fold_radius(k1: float, k2: float, k3: float, k4: float = 0.0) -> float:
     """Smallest undistorted radius where the radial map ``r * g(r^2)`` stops increasing.
 
     Parameters
     ----------
-    k1, k2, k3 : float
-        Radial coefficients.
+    k1, k2, k3, k4 : float
+        Radial coefficients (``k4`` on ``r^8``).
 
     Returns
     -------
     float
-        The first positive root of ``d(r g)/dr = 1 + 3 k1 r^2 + 5 k2 r^4 + 7 k3 r^6``
+        The first positive root of
+        ``d(r g)/dr = 1 + 3 k1 r^2 + 5 k2 r^4 + 7 k3 r^6 + 9 k4 r^8``
         (normalised units), or ``inf`` if the map is monotonic for all ``r >= 0``.
     """
     # Coefficients in s = r^2, highest power first. Leading terms that stay below 1e-12
     # for every r <= _R_FOLD_MAX cannot fold the model where it matters; dropping them
     # also keeps the companion matrix finite (a denormal k3 would overflow it).
-    poly = [7.0 * k3, 5.0 * k2, 3.0 * k1, 1.0]
+    poly = [9.0 * k4, 7.0 * k3, 5.0 * k2, 3.0 * k1, 1.0]
     while len(poly) > 1 and abs(poly[0]) * _R_FOLD_MAX ** (2 * (len(poly) - 1)) < 1e-12:
         poly.pop(0)
     if len(poly) <= 1:
@@ -126,6 +145,7 @@ def undistort_normalized(
     p1: float,
     p2: float,
     k3: float,
+    k4: float = 0.0,
     r_max: float = math.inf,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Invert :func:`distort_normalized` by damped Newton iteration.
@@ -140,6 +160,8 @@ def undistort_normalized(
         Distorted normalised coordinates (broadcast together).
     k1, k2, p1, p2, k3 : float
         OpenCV distortion coefficients.
+    k4 : float
+        Radial coefficient of ``r^8`` (see the module notes).
     r_max : float
         Undistorted radius the solution must stay within (see :func:`radial_fold_radius`).
 
@@ -153,9 +175,9 @@ def undistort_normalized(
     shape = xd.shape
     xd = xd.ravel().copy()
     yd = yd.ravel().copy()
-    if k1 == 0.0 and k2 == 0.0 and k3 == 0.0 and p1 == 0.0 and p2 == 0.0:
+    if k1 == 0.0 and k2 == 0.0 and k3 == 0.0 and k4 == 0.0 and p1 == 0.0 and p2 == 0.0:
         return xd.reshape(shape), yd.reshape(shape)
-    coeffs = (k1, k2, p1, p2, k3)
+    coeffs = (k1, k2, p1, p2, k3, k4)
     r2_max = r_max * r_max
     x = xd.copy()
     y = yd.copy()
@@ -223,6 +245,7 @@ def undistort_normalized_nb(
     p1: float,
     p2: float,
     k3: float,
+    k4: float = 0.0,
     r_max: float = math.inf,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Compiled twin of :func:`undistort_normalized` (same arguments and results).
@@ -234,7 +257,7 @@ def undistort_normalized_nb(
     shape = xd.shape
     xd = np.ascontiguousarray(xd.ravel())
     yd = np.ascontiguousarray(yd.ravel())
-    if k1 == 0.0 and k2 == 0.0 and k3 == 0.0 and p1 == 0.0 and p2 == 0.0:
+    if k1 == 0.0 and k2 == 0.0 and k3 == 0.0 and k4 == 0.0 and p1 == 0.0 and p2 == 0.0:
         return xd.copy().reshape(shape), yd.copy().reshape(shape)
     out_x = np.empty_like(xd)
     out_y = np.empty_like(yd)
@@ -246,6 +269,7 @@ def undistort_normalized_nb(
         float(p1),
         float(p2),
         float(k3),
+        float(k4),
         float(r_max) ** 2,
         out_x,
         out_y,

@@ -10,9 +10,10 @@ Conventions (``docs/conventions.md``):
   ``v in [-0.5, height - 0.5]``. OpenCV calibrations use the same convention, so their
   ``cx, cy`` are taken as they are.
 * Lens model: OpenCV's radial (``k1, k2, k3``) and tangential (``p1, p2``) distortion of
-  the ideal normalised coordinates, inverted by damped Newton iteration: stated in full
-  in ``core.camera.lens``. :class:`Intrinsics` refuses coefficients whose radial model
-  folds back inside the image.
+  the ideal normalised coordinates, plus an optional ``r^8`` radial term ``k4`` (the
+  polynomial one of Metashape and weitsicht, not OpenCV's rational ``k4``), inverted by
+  damped Newton iteration: stated in full in ``core.camera.lens``. :class:`Intrinsics`
+  refuses coefficients whose radial model folds back inside the image.
 
 The lens model's array functions live in ``core.camera.lens`` (its numba kernel in
 ``core.camera._lens_kernels``); the classes here validate.
@@ -48,7 +49,9 @@ __all__ = [
 CAMERA_FORMAT = "demtrack.camera"
 CAMERA_FORMAT_VERSION = 1
 
-_INTRINSIC_KEYS = ("fx", "fy", "cx", "cy", "width", "height", "k1", "k2", "p1", "p2", "k3")
+_INTRINSIC_KEYS = (
+    "fx", "fy", "cx", "cy", "width", "height", "k1", "k2", "p1", "p2", "k3", "k4",
+)  # fmt: skip
 
 
 def rotation_from_azimuth_tilt_roll(
@@ -111,6 +114,10 @@ class Intrinsics:
         Image size in pixels (>= 1).
     k1, k2, p1, p2, k3 : float
         OpenCV radial (k) and tangential (p) distortion coefficients.
+    k4 : float
+        Radial coefficient of ``r^8`` (``g = 1 + k1 r^2 + k2 r^4 + k3 r^6 + k4 r^8``): the
+        polynomial term of Metashape's and weitsicht's Brown model, **not** OpenCV's
+        rational ``k4``. Default 0 (OpenCV's five-coefficient model).
 
     Raises
     ------
@@ -130,11 +137,12 @@ class Intrinsics:
     p1: float = 0.0
     p2: float = 0.0
     k3: float = 0.0
+    k4: float = 0.0
     #: Undistorted normalised radius where the radial model folds (``inf`` if never).
     fold_radius: float = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        for name in ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"):
+        for name in ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4"):
             object.__setattr__(self, name, _finite(name, getattr(self, name)))
         if self.fx <= 0 or self.fy <= 0:
             raise CameraError(f"focal lengths must be positive, got fx={self.fx}, fy={self.fy}")
@@ -145,20 +153,29 @@ class Intrinsics:
                     f"{name} must be a positive whole number of pixels, got {getattr(self, name)!r}"
                 )
             object.__setattr__(self, name, int(value))
-        r_fold = radial_fold_radius(self.k1, self.k2, self.k3)
+        r_fold = radial_fold_radius(self.k1, self.k2, self.k3, self.k4)
         object.__setattr__(self, "fold_radius", r_fold)
         if self.has_distortion:
             self._check_invertible()
 
     @property
     def coeffs(self) -> tuple[float, float, float, float, float]:
-        """Distortion coefficients in OpenCV order ``(k1, k2, p1, p2, k3)``."""
+        """OpenCV's five distortion coefficients ``(k1, k2, p1, p2, k3)``.
+
+        What ``cv2`` takes as ``distCoeffs``. It leaves out ``k4`` (OpenCV has no
+        polynomial ``r^8`` term); the lens functions take :attr:`lens_coeffs`.
+        """
         return (self.k1, self.k2, self.p1, self.p2, self.k3)
+
+    @property
+    def lens_coeffs(self) -> tuple[float, float, float, float, float, float]:
+        """All six coefficients ``(k1, k2, p1, p2, k3, k4)``, as ``core.camera.lens`` takes them."""
+        return (self.k1, self.k2, self.p1, self.p2, self.k3, self.k4)
 
     @property
     def has_distortion(self) -> bool:
         """True if any distortion coefficient is non-zero."""
-        return any(c != 0.0 for c in self.coeffs)
+        return any(c != 0.0 for c in self.lens_coeffs)
 
     @property
     def K(self) -> np.ndarray:  # noqa: N802 - the calibration matrix is K everywhere
@@ -176,12 +193,12 @@ class Intrinsics:
         r_fold = self.fold_radius
         if math.isfinite(r_fold):
             s = r_fold * r_fold
-            rho_fold = r_fold * (1.0 + s * (self.k1 + s * (self.k2 + s * self.k3)))
+            rho_fold = r_fold * (1.0 + s * (self.k1 + s * (self.k2 + s * (self.k3 + s * self.k4))))
             if not rho_fold > rd_corner:
                 raise CameraError(
                     "distortion is not invertible within the image: the radial model "
-                    f"(k1={self.k1}, k2={self.k2}, k3={self.k3}) folds back at distorted "
-                    f"radius {rho_fold:.6g} (normalised), inside the image corner radius "
+                    f"(k1={self.k1}, k2={self.k2}, k3={self.k3}, k4={self.k4}) folds back at "
+                    f"distorted radius {rho_fold:.6g} (normalised), inside the image corner radius "
                     f"{rd_corner:.6g}"
                 )
         # Radial monotonicity settles the radial-only model exactly; tangential terms can
@@ -191,18 +208,21 @@ class Intrinsics:
         uu, vv = np.meshgrid(gu, gv)
         # The numpy twin: no compilation just to build an Intrinsics.
         xn, yn = undistort_normalized(
-            (uu - self.cx) / self.fx, (vv - self.cy) / self.fy, *self.coeffs, r_max=self.fold_radius
+            (uu - self.cx) / self.fx,
+            (vv - self.cy) / self.fy,
+            *self.lens_coeffs,
+            r_max=self.fold_radius,
         )
         if not (np.isfinite(xn).all() and np.isfinite(yn).all()):
             raise CameraError(
                 "distortion is not invertible within the image: some pixels "
-                f"have no undistorted preimage (coefficients {self.coeffs})"
+                f"have no undistorted preimage (coefficients {self.lens_coeffs})"
             )
-        a, b, c, d = distortion_jacobian(xn, yn, *self.coeffs)
+        a, b, c, d = distortion_jacobian(xn, yn, *self.lens_coeffs)
         if not (a * d - b * c > 0.0).all():
             raise CameraError(
                 "distortion is not invertible within the image: its Jacobian "
-                f"is singular or reflecting (coefficients {self.coeffs})"
+                f"is singular or reflecting (coefficients {self.lens_coeffs})"
             )
 
     def distort(self, xn: ArrayLike, yn: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -220,7 +240,7 @@ class Intrinsics:
         """
         xn = np.asarray(xn, dtype=np.float64)
         yn = np.asarray(yn, dtype=np.float64)
-        xd, yd = distort_normalized(xn, yn, *self.coeffs)
+        xd, yd = distort_normalized(xn, yn, *self.lens_coeffs)
         u = self.fx * xd + self.cx
         v = self.fy * yd + self.cy
         if math.isfinite(self.fold_radius):
@@ -244,7 +264,7 @@ class Intrinsics:
         """
         xd = (np.asarray(u, dtype=np.float64) - self.cx) / self.fx
         yd = (np.asarray(v, dtype=np.float64) - self.cy) / self.fy
-        return undistort_normalized_nb(xd, yd, *self.coeffs, r_max=self.fold_radius)
+        return undistort_normalized_nb(xd, yd, *self.lens_coeffs, r_max=self.fold_radius)
 
     def in_image(self, u: ArrayLike, v: ArrayLike) -> np.ndarray:
         """Flag pixels on the image, edges included (NaN counts as outside)."""
@@ -253,8 +273,15 @@ class Intrinsics:
         return (u >= -0.5) & (u <= self.width - 0.5) & (v >= -0.5) & (v <= self.height - 0.5)
 
     def to_dict(self) -> dict[str, float | int]:
-        """Plain JSON-ready mapping of the eleven parameters (keys as the constructor's)."""
-        return {k: getattr(self, k) for k in _INTRINSIC_KEYS}
+        """Plain JSON-ready mapping of the parameters (keys as the constructor's).
+
+        ``k4`` is written only when non-zero, so five-coefficient cameras keep the
+        eleven keys that earlier demtrack versions wrote and read.
+        """
+        out = {k: getattr(self, k) for k in _INTRINSIC_KEYS}
+        if out["k4"] == 0.0:
+            del out["k4"]
+        return out
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Intrinsics:
@@ -464,7 +491,7 @@ class Camera:
 
             {"format": "demtrack.camera", "version": 1,
              "intrinsics": {"fx", "fy", "cx", "cy", "width", "height",
-                            "k1", "k2", "p1", "p2", "k3"},
+                            "k1", "k2", "p1", "p2", "k3", "k4"?},
              "position_enu": [e_m, n_m, u_m],
              "R_world_cam": [[...], [...], [...]]}        # row-major
 

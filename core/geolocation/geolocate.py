@@ -549,7 +549,7 @@ def _perturbations_from_unit(
     sigma_px: float,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The body of :func:`_pixel_perturbations` after its unit rays are known."""
-    a, b, c, d = distortion_jacobian(xn, yn, *intr.coeffs)
+    a, b, c, d = distortion_jacobian(xn, yn, *intr.lens_coeffs)
     det = a * d - b * c
     n = len(xn)
     # Columns of the inverse Jacobian, per pixel: d(xn, yn)/du and d(xn, yn)/dv.
@@ -594,7 +594,7 @@ def _pixel_perturbations(
     """
     intr = camera.intrinsics
     xn, yn = intr.undistort(u, v)
-    a, b, c, d = distortion_jacobian(xn, yn, *intr.coeffs)
+    a, b, c, d = distortion_jacobian(xn, yn, *intr.lens_coeffs)
     det = a * d - b * c
     # Columns of the inverse Jacobian, per pixel: d(xn, yn)/du and d(xn, yn)/dv.
     zero = np.zeros_like(xn)

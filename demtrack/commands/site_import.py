@@ -11,7 +11,7 @@ import argparse
 import json
 import shutil
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from demtrack.core.errors import CameraError, SiteError
 
@@ -21,6 +21,8 @@ if TYPE_CHECKING:
     from demtrack.core.camera.pinhole import Intrinsics
     from demtrack.core.geo.geoid import GeoidModel
     from demtrack.core.terrain.dem_import import DemImport
+    from demtrack.core.camera.pose import SurveyedPose
+    from demtrack.core.site.folder import Site
 
 __all__ = ["register"]
 
@@ -339,12 +341,54 @@ def _intrinsics(args: argparse.Namespace) -> Intrinsics:
         args.p1,
         args.p2,
         args.k3,
+        args.k4,
     )
+
+
+def _pose(args: argparse.Namespace, site: Site, intr: Intrinsics, crs: Any) -> SurveyedPose:
+    """The surveyed pose from --az/--tilt/--roll, --opk or --rotation (exactly one)."""
+    from demtrack.core.camera.pose import (
+        pose_from_rotation,
+        pose_from_survey,
+        rotation_from_opk_deg,
+    )
+
+    given = [o for o, v in (("--az", args.az), ("--opk", args.opk), ("--rotation", args.rotation))
+             if v is not None]  # fmt: skip
+    if len(given) != 1:
+        raise CameraError(
+            "give the orientation once: --az with --tilt (and --roll), or --opk OMEGA PHI "
+            f"KAPPA, or --rotation R11 .. R33 (got {', '.join(given) or 'none'})"
+        )
+    x, y, z = args.position
+    # the geoid's N at the camera itself (per point for a grid such as EGM96)
+    n_geoid = _n_at(site.geoid, x, y, crs) if args.vertical_datum == "orthometric" else 0.0
+    if args.az is not None:
+        if args.tilt is None:
+            raise CameraError("--az needs --tilt (negative looks down)")
+        return pose_from_survey(
+            site.frame, intr, x, y, z, crs, args.az, args.tilt, args.roll or 0.0,
+            north=args.north or "true", geoid_undulation_m=n_geoid,
+        )  # fmt: skip
+    if args.tilt is not None or args.roll is not None:
+        raise CameraError(f"--tilt and --roll go with --az, not with {given[0]}")
+    if args.opk is not None:
+        rot = rotation_from_opk_deg(*args.opk)
+    else:
+        import numpy as np
+
+        rot = np.asarray(args.rotation, dtype=float).reshape(3, 3)
+    try:
+        return pose_from_rotation(
+            site.frame, intr, x, y, z, crs, rot, north=args.north, geoid_undulation_m=n_geoid
+        )
+    except CameraError as exc:
+        raise CameraError(f"{given[0]}: {exc}") from None
 
 
 def _run_add_camera(args: argparse.Namespace) -> int:
     from demtrack.core.camera.pantilt import PanTiltHead
-    from demtrack.core.camera.pose import check_camera_on_dem, pose_from_survey
+    from demtrack.core.camera.pose import check_camera_on_dem
     from demtrack.core.geo.geodesy import as_crs
     from demtrack.core.site.folder import Sensor, load_site
     from demtrack.core.site.update import read_manifest, write_atomic, write_manifest
@@ -356,25 +400,11 @@ def _run_add_camera(args: argparse.Namespace) -> int:
         raise SiteError(f"sensor {args.id!r} already exists; pass --replace to overwrite it")
     intr = _intrinsics(args)
     crs = as_crs(args.crs)
-    x, y, z = args.position
     if args.vertical_datum == "orthometric" and not site.geoid.orthometric:
         raise SiteError(
             "--vertical-datum orthometric: this site states no geoid (site.json vertical_datum)"
         )
-    n_geoid = _n_at(site.geoid, x, y, crs) if args.vertical_datum == "orthometric" else 0.0
-    pose = pose_from_survey(
-        site.frame,
-        intr,
-        x,
-        y,
-        z,
-        crs,
-        args.az,
-        args.tilt,
-        args.roll,
-        north=args.north,
-        geoid_undulation_m=n_geoid,
-    )
+    pose = _pose(args, site, intr, crs)
     check_camera_on_dem(args.id, pose.camera.position_enu, site.dem)
     image_rel = None
     if args.image is not None:
@@ -400,12 +430,22 @@ def _run_add_camera(args: argparse.Namespace) -> int:
         f"{args.id}: at E {e:.3f} N {n:.3f} U {u:.3f} m (lat {pose.lat_deg:.8f} "
         f"lon {pose.lon_deg:.8f} h {pose.h_m:.3f} m ellipsoidal)"
     )
-    ref = (
-        f"grid azimuth {args.az:.4f} + convergence {pose.convergence_deg:+.4f} = true "
-        f"{pose.az_true_deg:.4f} deg"
-        if args.north == "grid"
-        else f"true azimuth {pose.az_true_deg:.4f} deg"
-    )
+    if args.az is None:
+        from demtrack.core.geo.geodesy import horizontal_crs
+
+        grid = args.north == "grid" or (args.north is None and horizontal_crs(crs).is_projected)
+        axes = "the CRS's grid axes" if grid else "east, true north, up at the camera"
+        ref = (
+            f"rotation in {axes} (convergence {pose.convergence_deg:+.4f} deg); "
+            f"optical axis at true azimuth {pose.az_true_deg:.4f} deg"
+        )
+    elif args.north == "grid":
+        ref = (
+            f"grid azimuth {args.az:.4f} + convergence {pose.convergence_deg:+.4f} = true "
+            f"{pose.az_true_deg:.4f} deg"
+        )
+    else:
+        ref = f"true azimuth {pose.az_true_deg:.4f} deg"
     print(
         f"  {ref}; in the site frame az {pose.site_az_deg:.4f} tilt "
         f"{pose.site_tilt_deg:.4f} roll {pose.site_roll_deg:.4f} deg"
@@ -502,13 +542,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument("--crs", default="EPSG:4979", help="CRS of --position (default EPSG:4979)")
     _datum(p, "camera's")
-    p.add_argument("--az", type=float, required=True, metavar="DEG", help="azimuth, clockwise")
+    p.add_argument("--az", type=float, metavar="DEG", help="azimuth, clockwise (with --tilt)")
     p.add_argument(
-        "--north", choices=("true", "grid"), default="true",
-        help="--az is from true north (default) or from the CRS's grid north",
+        "--north", choices=("true", "grid"),
+        help="--az is from true north (default) or from the CRS's grid north; --opk and "
+        "--rotation are in the CRS's grid axes (default for a projected CRS) or true ENU",
     )  # fmt: skip
-    p.add_argument("--tilt", type=float, required=True, metavar="DEG", help="negative = down")
-    p.add_argument("--roll", type=float, default=0.0, metavar="DEG")
+    p.add_argument("--tilt", type=float, metavar="DEG", help="negative = down")
+    p.add_argument("--roll", type=float, metavar="DEG", help="with --az (default 0)")
+    p.add_argument(
+        "--opk", type=float, nargs=3, metavar=("OMEGA", "PHI", "KAPPA"),
+        help="photogrammetric omega phi kappa (deg; R = Rx Ry Rz, camera x right y up z back)",
+    )  # fmt: skip
+    p.add_argument(
+        "--rotation", type=float, nargs=9, metavar="R",
+        help="R_world_cam row by row: OpenCV camera axes (x right, y down, z forward) "
+        "into the world axes (see --north)",
+    )  # fmt: skip
     p.add_argument("--pan", type=float, default=0.0, metavar="DEG", help="head pan reading")
     p.add_argument("--intrinsics", metavar="FILE.json")
     for key in ("fx", "fy"):
@@ -519,6 +569,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--height", type=positive_int, metavar="PX")
     for key in ("k1", "k2", "p1", "p2", "k3"):
         p.add_argument(f"--{key}", type=float, default=0.0)
+    p.add_argument("--k4", type=float, default=0.0, help="r^8 term (not OpenCV's rational k4)")
     p.add_argument("--image", metavar="FILE", help="a still from the camera")
     p.add_argument("--replace", action="store_true", help="overwrite a sensor of that id")
     p.set_defaults(func=_run_add_camera)

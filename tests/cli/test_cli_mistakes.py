@@ -70,6 +70,42 @@ MISTAKES: list[tuple[str, str]] = [
         " --az inf --tilt 0",
         "--az",
     ),
+    # add-camera's orientation: --az/--tilt/--roll, --opk or --rotation, exactly one
+    (
+        "add-camera --site {site} --id c9 --position -79 40 300 --vertical-datum ellipsoidal"
+        " --fx 1000 --width 640 --height 480 --az 0 --tilt 0 --opk 0 0 0",
+        "give the orientation once",
+    ),
+    (
+        "add-camera --site {site} --id c9 --position -79 40 300 --vertical-datum ellipsoidal"
+        " --fx 1000 --width 640 --height 480",
+        "give the orientation once",
+    ),
+    (
+        "add-camera --site {site} --id c9 --position -79 40 300 --vertical-datum ellipsoidal"
+        " --fx 1000 --width 640 --height 480 --az 10",
+        "--az needs --tilt",
+    ),
+    (
+        "add-camera --site {site} --id c9 --position -79 40 300 --vertical-datum ellipsoidal"
+        " --fx 1000 --width 640 --height 480 --opk 0 0 0 --tilt 5",
+        "--tilt and --roll go with --az",
+    ),
+    (
+        "add-camera --site {site} --id c9 --position -79 40 300 --vertical-datum ellipsoidal"
+        " --fx 1000 --width 640 --height 480 --rotation 1 0 0 0 1 0 0 0 2",
+        "proper rotation",
+    ),
+    (
+        "add-camera --site {site} --id c9 --position -79 40 300 --vertical-datum ellipsoidal"
+        " --fx 1000 --width 640 --height 480 --rotation 1 0 0",
+        "--rotation",
+    ),
+    (
+        "add-camera --site {site} --id c9 --position -79 40 300 --vertical-datum ellipsoidal"
+        " --fx 1000 --width 640 --height 480 --opk 0 nan 0",
+        "--opk",
+    ),
     # geolocate
     ("geolocate --site {site} --sensor cam1 --pixel nan 10", "is outside the"),
     ("geolocate --site {site} --sensor cam1 --pixel ten 10", "--pixel expected a number"),

@@ -29,7 +29,12 @@ WILD = Intrinsics(
     1000.0, 1000.0, 959.5, 539.5, W, H, k1=-0.5, k2=0.2, p1=0.001, p2=-0.002, k3=-0.01
 )
 PINCUSHION = Intrinsics(1400.0, 1400.0, 970.0, 530.0, W, H, k1=0.15, k2=0.05)
-LENSES = [PLAIN, BARREL, WILD, PINCUSHION]
+# A real aerial camera with an r^8 term (weitsicht's ariel right camera, pre-calibrated).
+ARIEL = Intrinsics(
+    9524.786, 9524.788, 5811.896, 4422.312, 11664, 8750,
+    k1=0.01598, k2=-0.07004, p1=1.016e-05, p2=1.284e-05, k3=0.0194, k4=0.006022,
+)  # fmt: skip
+LENSES = [PLAIN, BARREL, WILD, PINCUSHION, ARIEL]
 
 
 def image_grid(intr: Intrinsics, n: int = 41) -> tuple[np.ndarray, np.ndarray]:
@@ -40,22 +45,22 @@ def image_grid(intr: Intrinsics, n: int = 41) -> tuple[np.ndarray, np.ndarray]:
     return uu.ravel(), vv.ravel()
 
 
-def opencv_formula(x, y, k1, k2, p1, p2, k3):
-    """The distortion as OpenCV documents it, written out independently."""
+def opencv_formula(x, y, k1, k2, p1, p2, k3, k4=0.0):
+    """The distortion as OpenCV documents it (plus ``k4 r^8``), written out independently."""
     r2 = x**2 + y**2
-    radial = 1 + k1 * r2 + k2 * r2**2 + k3 * r2**3
+    radial = 1 + k1 * r2 + k2 * r2**2 + k3 * r2**3 + k4 * r2**4
     return (
         x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x**2),
         y * radial + p1 * (r2 + 2 * y**2) + 2 * p2 * x * y,
     )
 
 
-def opencv_fixed_point(xd, yd, k1, k2, p1, p2, k3, iters=20):
+def opencv_fixed_point(xd, yd, k1, k2, p1, p2, k3, k4=0.0, iters=20):
     """cv::undistortPoints' iteration: x <- (xd - tangential(x)) / radial(x)."""
     x, y = xd.copy(), yd.copy()
     for _ in range(iters):
         r2 = x * x + y * y
-        g = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        g = 1 + r2 * (k1 + r2 * (k2 + r2 * (k3 + r2 * k4)))
         x, y = (
             (xd - (2 * p1 * x * y + p2 * (r2 + 2 * x * x))) / g,
             (yd - (p1 * (r2 + 2 * y * y) + 2 * p2 * x * y)) / g,
@@ -136,19 +141,27 @@ def test_distortion_matches_opencv_formula_and_jacobian():
     rng = np.random.default_rng(0)
     x, y = rng.uniform(-1.2, 1.2, (2, 500))
     for intr in LENSES:
-        xd, yd = distort_normalized(x, y, *intr.coeffs)
-        ex, ey = opencv_formula(x, y, *intr.coeffs)
+        xd, yd = distort_normalized(x, y, *intr.lens_coeffs)
+        ex, ey = opencv_formula(x, y, *intr.lens_coeffs)
         np.testing.assert_allclose(xd, ex, rtol=0, atol=1e-14)
         np.testing.assert_allclose(yd, ey, rtol=0, atol=1e-14)
         h = 1e-6
-        jac = distortion_jacobian(x, y, *intr.coeffs)
+        jac = distortion_jacobian(x, y, *intr.lens_coeffs)
         fd = [
-            (np.subtract(*[distort_normalized(x + s * h, y, *intr.coeffs)[i] for s in (1, -1)]))
+            (
+                np.subtract(
+                    *[distort_normalized(x + s * h, y, *intr.lens_coeffs)[i] for s in (1, -1)]
+                )
+            )
             / (2 * h)
             for i in (0, 1)
         ]
         fdy = [
-            (np.subtract(*[distort_normalized(x, y + s * h, *intr.coeffs)[i] for s in (1, -1)]))
+            (
+                np.subtract(
+                    *[distort_normalized(x, y + s * h, *intr.lens_coeffs)[i] for s in (1, -1)]
+                )
+            )
             / (2 * h)
             for i in (0, 1)
         ]
@@ -168,6 +181,9 @@ def test_radial_fold_radius_analytic():
     assert radial_fold_radius(-0.1, 0.0, 0.0) == pytest.approx(math.sqrt(1 / 0.3), rel=1e-12)
     # 1 + 5 k2 r^4 = 0
     assert radial_fold_radius(0.0, -0.05, 0.0) == pytest.approx((1 / 0.25) ** 0.25, rel=1e-12)
+    # 1 + 9 k4 r^8 = 0
+    assert radial_fold_radius(0.0, 0.0, 0.0, -0.01) == pytest.approx((1 / 0.09) ** 0.125, rel=1e-12)
+    assert radial_fold_radius(0.0, 0.0, 0.0, 0.01) == math.inf
 
 
 @pytest.mark.parametrize("intr", LENSES)
@@ -203,8 +219,8 @@ def test_compiled_undistort_matches_numpy_twin():
         v = rng.uniform(-3 * H, 4 * H, 3000)
         u[:3], v[:3] = np.nan, 0.0
         xd, yd = (u - intr.cx) / intr.fx, (v - intr.cy) / intr.fy
-        a = undistort_normalized(xd, yd, *intr.coeffs, r_max=intr.fold_radius)
-        b = undistort_normalized_nb(xd, yd, *intr.coeffs, r_max=intr.fold_radius)
+        a = undistort_normalized(xd, yd, *intr.lens_coeffs, r_max=intr.fold_radius)
+        b = undistort_normalized_nb(xd, yd, *intr.lens_coeffs, r_max=intr.fold_radius)
         for p, q in zip(a, b, strict=True):
             np.testing.assert_array_equal(np.isnan(p), np.isnan(q))
             np.testing.assert_allclose(p, q, rtol=0, atol=1e-12)
@@ -217,6 +233,27 @@ def test_lens_folding_inside_image_is_rejected():
         Intrinsics(1000.0, 1000.0, 959.5, 539.5, W, H, k1=-0.5)
     # Same lens on a small enough sensor is fine.
     Intrinsics(1000.0, 1000.0, 199.5, 199.5, 400, 400, k1=-0.5)
+
+
+def test_r8_term_folds_and_is_rejected():
+    # k4 alone: 1 + 9 k4 r^8 = 0 at r = 0.829, distorted radius 0.737 < corner radius 1.10.
+    with pytest.raises(CameraError, match="not invertible"):
+        Intrinsics(1000.0, 1000.0, 959.5, 539.5, W, H, k4=-0.5)
+    # Dropping k4 from the same lens is a different, valid camera: k4 is really used.
+    Intrinsics(1000.0, 1000.0, 959.5, 539.5, W, H)
+
+
+def test_r8_term_moves_the_image_corners_as_its_formula_says():
+    # At the corners of the ariel camera r^2 = 0.59-0.61: k4 r^8 moves them radially by
+    # fx * r * k4 * r^8 = 5.4-6.0 px against the same lens without it.
+    u, v = ARIEL.corners_px()
+    no_k4 = Intrinsics(**{**ARIEL.to_dict(), "k4": 0.0})
+    xn, yn = ARIEL.undistort(u, v)
+    u0, v0 = no_k4.distort(xn, yn)
+    r2 = xn**2 + yn**2
+    expect = ARIEL.fx * np.sqrt(r2) * ARIEL.k4 * r2**4
+    np.testing.assert_allclose(np.hypot(u0 - u, v0 - v), expect, rtol=1e-5)
+    assert np.hypot(u0 - u, v0 - v).min() > 5.0
 
 
 def test_tangential_fold_is_rejected():
@@ -386,6 +423,12 @@ def test_to_dict_round_trips_through_json():
     assert doc["format"] == "demtrack.camera" and doc["version"] == 1
     assert Camera.from_dict(doc) == cam
     assert Intrinsics.from_dict(WILD.to_dict()) == WILD
+    # k4 is written only when it is not 0, so five-coefficient documents stay as they were.
+    assert "k4" not in WILD.to_dict()
+    assert ARIEL.to_dict()["k4"] == 0.006022
+    assert Intrinsics.from_dict(json.loads(json.dumps(ARIEL.to_dict()))) == ARIEL
+    # coeffs stays OpenCV's five (cv2's distCoeffs); the lens takes all six.
+    assert len(ARIEL.coeffs) == 5 and ARIEL.lens_coeffs[5] == 0.006022
 
 
 def test_from_dict_accepts_orientation_angles():

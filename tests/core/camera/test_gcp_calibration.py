@@ -72,6 +72,25 @@ def test_recovers_orientation_focal_length_and_k1(dem):
     assert not fit.outliers.any() and fit.converged
 
 
+def test_a_lens_with_an_r8_term_keeps_it_through_the_fit(dem):
+    # GCPs seen through a lens with k4 (weitsicht's / Metashape's r^8 term); the fit frees
+    # the orientation only and must neither drop k4 nor absorb it into the pose.
+    lens = Intrinsics(1000.0, 1000.0, 639.5, 359.5, 1280, 720, k1=-0.05, k4=0.002)
+    true = Camera.from_azimuth_tilt_roll(lens, [0.0, 0.0, 40.0], 30.0, -8.0, 1.5)
+    rng = np.random.default_rng(3)
+    u, v = rng.uniform(40, 1240, 80), rng.uniform(430, 700, 80)
+    o, d = true.pixel_to_ray(u, v)
+    hits = cast_rays(dem, o, d, 5000.0, mode="first")
+    ok = np.flatnonzero(hits.counts > 0)[:14]
+    pts = hits.points[hits.offsets[ok]]
+    gcps = [Gcp(f"g{i}", u[j], v[j], pts[i]) for i, j in enumerate(ok)]
+    start = Camera.from_azimuth_tilt_roll(lens, [0.0, 0.0, 40.0], 33.0, -6.0, 0.0)
+    fit = fit_camera_to_gcps(start, gcps, parse_free("yaw,tilt,roll"))
+    assert fit.camera.intrinsics.k4 == 0.002
+    assert fit.rmse_px < 1e-3  # noise-free: exact with the lens as it is
+    assert fit.camera.azimuth_tilt_roll_deg() == pytest.approx((30.0, -8.0, 1.5), abs=1e-5)
+
+
 def test_injected_blunder_is_flagged_excluded_and_does_not_bias(dem):
     gcps = make_gcps(dem)
     clean = fit_camera_to_gcps(START_POSE, gcps, ("yaw", "tilt", "roll"))
