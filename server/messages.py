@@ -118,6 +118,9 @@ class TrackPointBody(_Model):
     h_m: float
     sensors: list[str]
     detection_ids: list[int] = Field(description="the detections (fixes) behind this point")
+    time_utc: str | None = Field(
+        default=None, description="t_s as ISO 8601 UTC with Z (HTTP answers; not streamed)"
+    )
 
 
 class TrackBody(_Model):
@@ -189,6 +192,12 @@ class EventBody(_Model):
     h_m: float = Field(description="above the WGS84 ellipsoid")
     details: dict[str, Any] = Field(description="kind-specific figures")
     open: bool = Field(description="an episode still going on")
+    time_utc: str | None = Field(
+        default=None, description="t_start_s as ISO 8601 UTC with Z (HTTP answers; not streamed)"
+    )
+    end_time_utc: str | None = Field(
+        default=None, description="t_end_s as ISO 8601 UTC with Z (HTTP answers; not streamed)"
+    )
 
 
 class EventMessage(_Model):

@@ -121,3 +121,12 @@ def format_utc(t_s: float, digits: int = 3) -> str:
     if digits:
         text += "." + str(frac).rjust(digits, "0")
     return text + "Z"
+
+
+def clock_utc(t_s: float, digits: int = 0) -> str:
+    """The UTC clock time of UNIX seconds ``t_s``: ``14:32:05Z`` (``digits`` decimals).
+
+    For a line of text where the date is known from context (a stream log line); with
+    the date use :func:`format_utc`.
+    """
+    return format_utc(t_s, digits)[11:]

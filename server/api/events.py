@@ -10,6 +10,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from .. import listing
 from ..listing import EVENT_KINDS
 from ..messages import EventBody
+from ..time_fields import event_with_times
 from .deps import StateDep, TimeFrom, TimeTo
 
 __all__ = ["EVENT_KINDS", "EventsOut", "router"]
@@ -68,4 +69,4 @@ def list_events(
     rows, nxt = listing.list_events(
         state, t_from, t_to, kind, track, open_only, limit, sensor, offset
     )
-    return {"events": rows, "next_offset": nxt}
+    return {"events": [event_with_times(r) for r in rows], "next_offset": nxt}
