@@ -21,6 +21,7 @@ from demtrack.samplesite.replay_source import SAMPLE_SCENARIOS
 from demtrack.server.ingest.pipeline import Pipeline
 from demtrack.server.live_events import LiveEventParams
 from demtrack.server.store.database import Store
+from demtrack.server.synopsis import trajectory
 
 pytestmark = pytest.mark.timeout(900)
 SHIFT_S = 1.8e9  # 2027-01-15T08:00:00Z
@@ -86,6 +87,12 @@ def test_tracks_are_the_same_at_unix_times(runs):
         assert [p["detection_ids"] for p in a["points"]] == [
             p["detection_ids"] for p in b["points"]
         ]
+        for step_s in (0.5, 1.0, 5.0):  # the synopsis thins by time steps: the same points
+            sa, sb = trajectory(a, step_s), trajectory(b, step_s)
+            assert [len(p.get("path") or ()) for p in sa["parts"]] == [
+                len(p.get("path") or ()) for p in sb["parts"]
+            ]
+            assert sb["duration_s"] == pytest.approx(sa["duration_s"], abs=T_TOL_S)
     print(f"largest time difference {worst_s:.2e} s, position {worst_m:.2e} m")
     assert worst_s <= T_TOL_S and worst_m <= POS_TOL_M
     assert format_utc(tracks1[0]["points"][0]["t_s"]).startswith("2027-01-15T08:00:")
