@@ -192,12 +192,6 @@ class EventBody(_Model):
     h_m: float = Field(description="above the WGS84 ellipsoid")
     details: dict[str, Any] = Field(description="kind-specific figures")
     open: bool = Field(description="an episode still going on")
-    time_utc: str | None = Field(
-        default=None, description="t_start_s as ISO 8601 UTC with Z (HTTP answers; not streamed)"
-    )
-    end_time_utc: str | None = Field(
-        default=None, description="t_end_s as ISO 8601 UTC with Z (HTTP answers; not streamed)"
-    )
 
 
 class EventMessage(_Model):

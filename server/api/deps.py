@@ -54,7 +54,6 @@ OPERATOR = (Depends(require_operator),)
 SQLITE_INT_MAX = 2**63 - 1
 
 
-
 def _time_query(value: object, info: ValidationInfo) -> object:
     """A time parameter as UNIX seconds: a number, or ISO 8601 with a zone (422 without)."""
     if value is None:

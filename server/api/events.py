@@ -36,12 +36,19 @@ _KIND = Query(
 _SENSOR = Query(None, description="only events one of these sensors saw (repeat)")
 
 
+class EventOut(EventBody):
+    """A stored event with its start and end as ISO 8601 UTC beside the UNIX seconds."""
+
+    time_utc: str = Field(description="t_start_s as ISO 8601 UTC with Z")
+    end_time_utc: str = Field(description="t_end_s as ISO 8601 UTC with Z")
+
+
 class EventsOut(BaseModel):
     """Events overlapping the window, by start time."""
 
     model_config = ConfigDict(extra="forbid")
 
-    events: list[EventBody]
+    events: list[EventOut]
     next_offset: int | None = Field(
         None, description="the offset of the next page; null when this is the last"
     )

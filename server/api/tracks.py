@@ -93,9 +93,7 @@ async def export_tracks(
         wanted = set(track)
         bodies = [b for b in bodies if b["id"] in wanted]
     heights = site_heights(state.site)
-    data = await run_in_threadpool(
-        export_bytes, format, bodies, state.site.frame, when, heights
-    )
+    data = await run_in_threadpool(export_bytes, format, bodies, state.site.frame, when, heights)
     media, suffix = EXPORT_TYPES[format]
     return Response(
         data,

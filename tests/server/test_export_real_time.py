@@ -79,7 +79,9 @@ def test_track_points_and_events_carry_iso_times(real):
     tracks = c.get("/api/tracks", headers=AUTH).json()["tracks"]
     assert tracks
     for p in tracks[0]["points"]:
-        assert p["time_utc"] == format_utc(p["t_s"]) and p["time_utc"].startswith("2026-12-01T14:30:")
+        assert p["time_utc"] == format_utc(p["t_s"]) and p["time_utc"].startswith(
+            "2026-12-01T14:30:"
+        )
     one = c.get(f"/api/tracks/{tracks[0]['id']}", headers=AUTH).json()["tracks"][0]
     assert one["points"][0]["time_utc"] == tracks[0]["points"][0]["time_utc"]
     events = c.get("/api/events", headers=AUTH).json()["events"]
@@ -156,3 +158,22 @@ def test_gpx_kml_gpkg_times_are_real_utc(real, tmp_path):
     geo = c.get("/api/tracks/export?format=geojson", headers=AUTH).json()
     props = geo["features"][0]["properties"]
     assert props["wall_clock"] is True and props["time"].startswith("times are UTC")
+
+
+def test_markers_take_an_iso_time(real):
+    c, _ = real
+    r = c.post(
+        "/api/markers",
+        headers=AUTH,
+        json={"time": "2026-12-01T15:32:05.5+01:00", "e_m": 10.0, "n_m": 20.0},
+    )
+    assert r.status_code == 201, r.text
+    assert r.json()["t_s"] == T0_S + 125.5
+    assert r.json()["time_utc"] == "2026-12-01T14:32:05.500Z"
+    for body, words in (
+        ({"time": "2026-12-01T15:32:05", "e_m": 1.0, "n_m": 2.0}, "no zone"),
+        ({"e_m": 1.0, "n_m": 2.0}, "one of them"),
+        ({"t_s": T0_S, "time": "2026-12-01T14:30:00Z", "e_m": 1.0, "n_m": 2.0}, "one of them"),
+    ):
+        r = c.post("/api/markers", headers=AUTH, json=body)
+        assert r.status_code == 422 and words in r.json()["detail"], r.text

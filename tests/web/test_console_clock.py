@@ -51,7 +51,9 @@ def test_clock_time_with_date_utc_and_local(browser, server_factory, scenario_re
         assert bad.status_code == 422 and "t_from" in bad.json()["detail"]
         assert "no zone" in bad.json()["detail"] and "\n" not in bad.json()["detail"]
 
-    context = browser.new_context(viewport={"width": 1280, "height": 800}, timezone_id="Europe/Berlin")
+    context = browser.new_context(
+        viewport={"width": 1280, "height": 800}, timezone_id="Europe/Berlin"
+    )
     pg = context.new_page()
     errors: list[str] = []
     pg.on("pageerror", lambda e: errors.append(str(e)))
@@ -71,7 +73,9 @@ def test_clock_time_with_date_utc_and_local(browser, server_factory, scenario_re
             return f"{shown[11:]} {name}", f"{shown[:10]} · newest {newest[11:]}"
 
         wait_until(lambda: label() == want(UTC, "UTC"), timeout_s=20, page=pg)
-        assert label()[0] == "14:30:12.3 UTC" and label()[1].startswith("2026-12-01 · newest 14:30:")
+        assert label()[0] == "14:30:12.3 UTC" and label()[1].startswith(
+            "2026-12-01 · newest 14:30:"
+        )
         assert pg.text_content("#clock-zone") == "UTC"
         rows = pg.locator("#event-list [data-t]")
         wait_until(lambda: rows.count() > 0, timeout_s=30, page=pg)
