@@ -50,7 +50,7 @@ def _run(site, tmp, name, records, shift_s):
     return tracks, events
 
 
-@pytest.fixture(scope="module", params=["rendezvous", "loitering", "vehicle-run"])
+@pytest.fixture(scope="module", params=["rendezvous", "loitering", "convoy", "vehicle-run"])
 def runs(request, sample_site_dir, tmp_path_factory):
     site = load_site(sample_site_dir)
     sc = SAMPLE_SCENARIOS.make(site, request.param, seed=0)
