@@ -23,6 +23,7 @@ __all__ = [
     "RaycastError",
     "SettingsError",
     "SiteError",
+    "TimeFormatError",
     "TrackingError",
     "UnknownSensorError",
 ]
@@ -82,6 +83,10 @@ class InputFileError(DemtrackError, ValueError):
 
 class DetectionError(DemtrackError, ValueError):
     """An invalid detection record."""
+
+
+class TimeFormatError(QueryError):
+    """A time that is not ISO 8601 with a zone, or not a finite number of UNIX seconds."""
 
 
 class TrackingError(DemtrackError, ValueError):

@@ -27,6 +27,7 @@ from pydantic import ValidationError
 from starlette.concurrency import run_in_threadpool
 
 from demtrack.core.errors import DemtrackError, SettingsError, SiteError
+from demtrack.core.io.times import format_utc
 from demtrack.core.site.folder import Site, load_site
 from demtrack.core.tracking import METHODS
 from demtrack.core.warm import SERVER_ENGINES, warm_up
@@ -150,6 +151,8 @@ def _start_replay(
     tracker's kernels, so no replayed detection waits for (or repeats) that compile.
     """
     t0 = start_time_after(store.last_times())
+    if settings.replay_start_s is not None:  # real UTC times, never before what is stored
+        t0 = max(t0, float(settings.replay_start_s))
     names = list(settings.replay)
 
     def frames() -> Any:
@@ -173,7 +176,9 @@ def _start_replay(
         speed=settings.replay_speed,
         min_interval_s=settings.replay_batch_s,
     )
-    log.info("replaying %s from t = %.0f s at %g x", ", ".join(names), t0, settings.replay_speed)
+    log.info(
+        "replaying %s from %s at %g x", ", ".join(names), format_utc(t0, 0), settings.replay_speed
+    )
     return replay.start()
 
 

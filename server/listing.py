@@ -12,6 +12,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from demtrack.core.errors import NotFoundError, QueryError
+from demtrack.core.io.times import format_utc
 from demtrack.core.tracking.types import Detection
 
 from .state import ConsoleState
@@ -68,6 +69,7 @@ def detection_rows(rows: list[tuple[int, Detection]]) -> list[dict[str, Any]]:
         {
             "id": i,
             "t": d.t_s,
+            "time_utc": format_utc(d.t_s),
             "sensor": d.sensor,
             "bbox": d.bbox,
             "class": d.cls,

@@ -95,16 +95,25 @@ class Window:
         return tuple(points[k].sensors for k in self.index.tolist())
 
 
+#: Times this close (s) to a thinning grid point count as on it (camera clocks are
+#: microseconds; float64 UNIX times have a 2.4e-7 s grain).
+_THIN_TOL_S = 1e-6
+
+
 def _thin(track: Track, t_from: float, sample_s: float) -> Window | None:
     """``track`` from ``t_from`` on, thinned to points ``sample_s`` apart."""
     t = track.t_s
-    k0 = int(np.searchsorted(t, t_from))
+    k0 = int(np.searchsorted(t, t_from - _THIN_TOL_S))  # a point on the window's start is in
     if k0 >= len(t):
         return None
     t = t[k0:]
-    grid = np.arange(t[0], t[-1] + sample_s, sample_s)
+    # On times relative to the window's first point, with a microsecond of tolerance:
+    # a grid built on UNIX times (1.8e9 s, float64 grain 2.4e-7 s) would pick its
+    # points by rounding ties, and thin the same track differently at another epoch.
+    rel = t - t[0]
+    grid = np.arange(0.0, rel[-1] + sample_s, sample_s) - _THIN_TOL_S
     # sorted already (the grid increases): unique = drop repeats, then the last point
-    keep = np.minimum(np.searchsorted(t, grid), len(t) - 1)
+    keep = np.minimum(np.searchsorted(rel, grid), len(t) - 1)
     keep = keep[np.concatenate(([True], keep[1:] != keep[:-1]))[: len(keep)]]
     if not len(keep) or keep[-1] != len(t) - 1:
         keep = np.append(keep, len(t) - 1)

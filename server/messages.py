@@ -118,6 +118,9 @@ class TrackPointBody(_Model):
     h_m: float
     sensors: list[str]
     detection_ids: list[int] = Field(description="the detections (fixes) behind this point")
+    time_utc: str | None = Field(
+        default=None, description="t_s as ISO 8601 UTC with Z (HTTP answers; not streamed)"
+    )
 
 
 class TrackBody(_Model):

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from demtrack.core.io.times import parse_iso_time
 
 from .messages import TrackBody
 
@@ -148,8 +150,10 @@ class DetectionBatch(_Request):
 
     Each record is ``{"t": s, "sensor": id, "bbox": [u_min, v_min, u_max, v_max],
     "class": "vehicle" | "human", "score": optional, "local_id": optional}`` (the
-    detection JSON Lines format). Records are checked one by one; bad ones are skipped
-    and counted by reason, the others stored.
+    detection JSON Lines format). ``t`` is UNIX seconds UTC (or, with the batch's
+    ``epoch``, seconds after it); ``"time": "2026-12-01T14:32:05.25Z"`` (ISO 8601 with a
+    zone) may stand for ``t``. Records are checked one by one; bad ones (a time without
+    a zone among them) are skipped and counted by reason, the others stored.
     """
 
     batch_key: str | None = Field(
@@ -160,6 +164,24 @@ class DetectionBatch(_Request):
         " is acknowledged again and not stored twice",
     )
     detections: list[Any] = Field(description="detection records (see above)")
+    epoch: str | None = Field(
+        default=None,
+        max_length=64,
+        description="ISO 8601 time with a zone: the records' numeric t are seconds after it"
+        " (a relative batch); default none, t are UNIX seconds",
+    )
+
+    @field_validator("epoch")
+    @classmethod
+    def _epoch_has_zone(cls, value: str | None) -> str | None:
+        if value is not None:
+            parse_iso_time(value, "epoch")
+        return value
+
+    @property
+    def epoch_s(self) -> float | None:
+        """The epoch as UNIX seconds (None: none declared)."""
+        return None if self.epoch is None else parse_iso_time(self.epoch, "epoch")
 
 
 class IngestIssueOut(_Response):
@@ -187,7 +209,8 @@ class StoredDetectionOut(_Response):
     """A stored detection."""
 
     id: int
-    t: float
+    t: float = Field(description="UNIX seconds, UTC")
+    time_utc: str = Field(description="t as ISO 8601 UTC with Z (milliseconds)")
     sensor: str
     bbox: tuple[float, float, float, float]
     cls: str = Field(serialization_alias="class")

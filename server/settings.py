@@ -7,11 +7,14 @@ arguments, then the environment (``DEMTRACK_SITE``, ``DEMTRACK_TOKEN``, ...), th
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Annotated, Any
 
 from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
+
+from demtrack.core.io.times import parse_time_value
 
 from .cot.target import parse_cot_url
 
@@ -69,6 +72,11 @@ class Settings(BaseSettings):
         The replayed cameras' frame rate (Hz).
     replay_duration_s : float
         Stop the replay after this much scenario time (s); 0 for no end.
+    replay_start_s : float or None
+        UTC time of the replay's start (UNIX seconds; ``DEMTRACK_REPLAY_START_S`` also
+        takes ISO 8601 with a zone, or ``now``): the replayed detections carry real times
+        from it (never before the store's newest time). None (the default): scenario
+        time, from 0 on a fresh store.
     replay_batch_s : float
         The replay sends the frames that fell due at most this often (wall seconds), as a
         camera gateway buffering that long would; 0 sends each frame as soon as it is due.
@@ -143,6 +151,7 @@ class Settings(BaseSettings):
     replay_rate_hz: float = Field(default=10.0, gt=0, le=100, allow_inf_nan=False)
     replay_duration_s: float = Field(default=0.0, ge=0, allow_inf_nan=False)
     replay_batch_s: float = Field(default=0.1, ge=0, le=10, allow_inf_nan=False)
+    replay_start_s: float | None = Field(default=None, ge=0, allow_inf_nan=False)
     scene3d: bool = False
     viser_host: str = "127.0.0.1"
     viser_port: int = Field(default=8080, ge=0, le=65535)
@@ -168,6 +177,16 @@ class Settings(BaseSettings):
     cot_stale_s: float = Field(default=60.0, gt=0, le=86_400, allow_inf_nan=False)
     cot_marker_stale_s: float = Field(default=86_400.0, gt=0, le=31_536_000, allow_inf_nan=False)
     cot_queue_size: int = Field(default=1000, gt=0, le=1_000_000)
+
+    @field_validator("replay_start_s", mode="before")
+    @classmethod
+    def _start_time(cls, value: Any) -> Any:
+        """``now`` or ISO 8601 with a zone (the environment's forms) as UNIX seconds."""
+        if isinstance(value, str) and value.strip():
+            if value.strip().lower() == "now":
+                return float(int(time.time()))
+            return parse_time_value(value, "replay_start_s")
+        return None if value == "" else value
 
     @field_validator("replay", mode="before")
     @classmethod

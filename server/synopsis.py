@@ -28,6 +28,12 @@ __all__ = [
 ]
 
 
+#: Points this close (s) to a full step apart count as a step apart: camera clocks are
+#: microseconds, and at UNIX times (1.8e9 s, float64 grain 2.4e-7 s) a difference of
+#: exactly one step would otherwise fall either side of it by rounding.
+STEP_TOL_S = 1e-6
+
+
 def _point(p: dict[str, Any]) -> dict[str, float]:
     return {k: p[k] for k in ("t_s", "e_m", "n_m", "u_m", "lat_deg", "lon_deg", "h_m")}
 
@@ -54,7 +60,7 @@ def _tracked(points: list[dict[str, Any]], step_s: float) -> dict[str, Any]:
             span[2] += 1
     path, last_t = [], -math.inf
     for k, p in enumerate(points):
-        if p["t_s"] - last_t >= step_s or k == len(points) - 1:
+        if p["t_s"] - last_t >= step_s - STEP_TOL_S or k == len(points) - 1:
             path.append(_point(p))
             last_t = p["t_s"]
     t0, t1 = points[0]["t_s"], points[-1]["t_s"]
@@ -139,13 +145,13 @@ def _since(t0: float, t: float) -> float:
 def _path(pts: list[dict[str, Any]], t_s: list[float], r0: int, r1: int, step_s: float) -> list:
     """``_tracked``'s path of ``pts[r0:r1]`` (times in order) by bisection.
 
-    The next point kept is the first whose ``t_s - last >= step_s``: that difference
+    The next point kept is the first whose ``t_s - last >= step_s - STEP_TOL_S``: that difference
     never decreases along ordered times (rounding is monotonic), so it is bisected for.
     """
     path = [_point(pts[r0])]
     k = last = r0
     while True:
-        k = bisect_left(t_s, step_s, k + 1, r1, key=partial(_since, t_s[last]))
+        k = bisect_left(t_s, step_s - STEP_TOL_S, k + 1, r1, key=partial(_since, t_s[last]))
         if k >= r1:
             break
         path.append(_point(pts[k]))

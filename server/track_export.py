@@ -19,12 +19,13 @@ epoch (1970-01-01T00:00:00Z, which is right as soon as ``t_s`` are UNIX seconds)
 
 from __future__ import annotations
 
-from datetime import UTC, datetime
+from collections.abc import Sequence
+from datetime import datetime, timedelta
 from typing import Any
 
 import numpy as np
 
-from demtrack.core.errors import QueryError
+from demtrack.core.io.times import parse_iso_time
 from demtrack.core.io.track_io import (
     TRACK_FORMATS,
     UNIX_EPOCH,
@@ -61,25 +62,28 @@ def track_from_body(body: dict[str, Any]) -> Track:
 
 
 def parse_epoch(text: str | None) -> datetime | None:
-    """The UTC time of ``t = 0 s`` from ISO 8601 ``text``; None when not given.
+    """The UTC time of ``t = 0 s`` from ISO 8601 ``text`` with a zone; None when not given.
 
-    A time without a zone is taken as UTC; :class:`QueryError` when ``text`` is not ISO 8601.
+    :class:`~demtrack.core.errors.TimeFormatError` (a :class:`QueryError`, 422) when
+    ``text`` is not ISO 8601 or has no zone.
     """
     if text is None:
         return None
-    try:
-        when = datetime.fromisoformat(text.replace("Z", "+00:00"))
-    except ValueError:
-        raise QueryError(f"epoch must be an ISO 8601 time, got {text!r}") from None
-    return when if when.tzinfo is not None else when.replace(tzinfo=UTC)
+    t_s = parse_iso_time(text, "epoch")
+    return UNIX_EPOCH + timedelta(seconds=t_s)
 
 
-def time_base(epoch: datetime | None, *, wall_clock: bool = False) -> TimeBase:
-    """The exports' times: ``epoch + t_s``, the UNIX epoch when none is given.
+def time_base(
+    epoch: datetime | None, *, wall_clock: bool | None = None, t_s: Sequence[float] = ()
+) -> TimeBase:
+    """The exports' times: ``epoch + t_s``; without an epoch, the store's UNIX seconds.
 
-    ``wall_clock``: the store's ``t_s`` are clock readings (UNIX seconds); it keeps none
-    today, so the files declare their times relative to the epoch.
+    ``wall_clock`` None: decided by :meth:`TimeBase.for_times` from the exported ``t_s``
+    (UNIX seconds are clock times; a store of session seconds, all before 2000, is
+    declared relative to 1970-01-01T00:00:00Z). A given epoch is a declared one.
     """
+    if wall_clock is None:
+        return TimeBase.for_times(list(t_s), epoch)
     return TimeBase(UNIX_EPOCH if epoch is None else epoch, wall_clock=wall_clock)
 
 
@@ -127,5 +131,8 @@ def export_bytes(
         lat, lon, h = (float(np.asarray(v)) for v in frame.to_geodetic(e, n, u))
         return lat, lon, h
 
-    times = epoch if isinstance(epoch, TimeBase) else time_base(epoch)
+    if isinstance(epoch, TimeBase):
+        times = epoch
+    else:
+        times = time_base(epoch, t_s=[p["t_s"] for b in bodies for p in b["points"]])
     return track_file_bytes(fmt, tracks, to_geodetic, times=times, heights=heights)

@@ -295,8 +295,9 @@ def detect_convoys(
             valid[:, None]
             & (valid & (length >= need))[None, :]
             & (_box_gaps(lo, hi) <= params.path_tolerance_m + _EPS)
-            & (last_t[None, :] >= first_t[:, None] + params.min_lag_s - _EPS)
-            & (first_t[None, :] <= last_t[:, None] + params.max_lag_s + _EPS)
+            # differences of times, not sums: _EPS survives at UNIX times (1.8e9 s)
+            & (last_t[None, :] - first_t[:, None] >= params.min_lag_s - _EPS)
+            & (first_t[None, :] - last_t[:, None] <= params.max_lag_s + _EPS)
         )
     np.fill_diagonal(cand, False)
     pairs = []

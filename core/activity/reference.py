@@ -83,7 +83,7 @@ def detect_rendezvous_reference(
             lo, hi = max(ta[0], tb[0]), min(ta[-1], tb[-1])
             if hi - lo < params.min_duration_s:
                 continue
-            grid = np.arange(lo, hi + 1e-9, params.dt_s)
+            grid = lo + np.arange(0.0, hi - lo + 1e-9, params.dt_s)  # relative: UNIX times
             pa, pb = _resample(trajectories[a], grid), _resample(trajectories[b], grid)
             close = np.hypot(*(pa[:, :2] - pb[:, :2]).T) <= params.distance_m
             still = (_speed(pa, params.dt_s) < params.stop_speed_mps) & (

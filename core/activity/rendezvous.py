@@ -65,7 +65,9 @@ def detect_rendezvous(
         lo_t, hi_t = max(ta[0], tb[0]), min(ta[-1], tb[-1])
         if hi_t - lo_t < params.min_duration_s:
             continue
-        grid = np.arange(lo_t, hi_t + 1e-9, params.dt_s)
+        # From the pair's start, not from t = 0: at UNIX times (1.8e9 s) a 1e-9 s slack
+        # added to hi_t is below float64's grain and the last sample would come and go.
+        grid = lo_t + np.arange(0.0, hi_t - lo_t + 1e-9, params.dt_s)
         if len(grid):
             pairs.append((int(a), int(b)))
             grids.append(grid)

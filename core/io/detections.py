@@ -1,13 +1,24 @@
 """Detection files: reading CSV and JSON Lines with a report of what was skipped.
 
-Two formats hold the same records, one detection per record. Times are seconds (``t``,
-float, any origin common to all sensors); boxes are pixels in demtrack's convention
-(``(0, 0)`` is the centre of the top-left pixel, so an image of width ``W`` spans
-``u in [-0.5, W - 0.5]``).
+Two formats hold the same records, one detection per record. Boxes are pixels in
+demtrack's convention (``(0, 0)`` is the centre of the top-left pixel, so an image of
+width ``W`` spans ``u in [-0.5, W - 0.5]``).
+
+Times are UTC. A record's time is either ``t``, a number of seconds, or an ISO 8601
+string with a zone (in ``t`` or in a ``time`` field/column instead of ``t``:
+``2026-12-01T14:32:05.250Z``, ``2026-12-01T15:32:05.25+01:00``). A number is UNIX
+seconds, unless the file declares an epoch, and then it is seconds after that epoch (a
+*relative* file): in CSV a comment line before the header, ``# epoch: 2026-12-01T14:30:00Z``;
+in JSON Lines a first record holding only the epoch, ``{"epoch": "2026-12-01T14:30:00Z"}``.
+An ISO time without a zone is refused (``malformed``). A file without an epoch whose
+numbers are all small (before 2000-01-01 as UNIX seconds) is still read, as seconds after
+1970-01-01T00:00:00Z, and the report says its times look relative
+(:attr:`IngestReport.relative`).
 
 CSV (UTF-8, comma-separated, a header row naming the columns, in any order; extra columns
 are ignored)::
 
+    # epoch: 2026-12-01T14:30:00Z
     t,sensor,u_min,v_min,u_max,v_max,class,score,local_id
     12.40,cam0,311.0,208.5,352.0,290.0,human,0.91,17
     12.40,cam1,80,40,160,95,vehicle,,
@@ -16,8 +27,8 @@ are ignored)::
 
 JSON Lines (UTF-8, one JSON object per line; blank lines are ignored)::
 
-    {"t": 12.4, "sensor": "cam0", "bbox": [311.0, 208.5, 352.0, 290.0], "class": "human",
-     "score": 0.91, "local_id": "17"}
+    {"time": "2026-12-01T14:30:12.4Z", "sensor": "cam0", "bbox": [311.0, 208.5, 352.0, 290.0],
+     "class": "human", "score": 0.91, "local_id": "17"}
 
 (one line in the file); ``score`` and ``local_id`` may be absent or null; a numeric
 ``local_id`` is kept as its decimal string.
@@ -46,6 +57,7 @@ from __future__ import annotations
 import csv
 import functools
 import io
+import itertools
 import json
 import math
 import os
@@ -55,12 +67,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
-from ..errors import InputFileError
+from ..errors import InputFileError, TimeFormatError
 from ..tracking.types import CLASSES, Detection
+from .times import format_utc, parse_iso_time
 
 __all__ = [
     "CSV_COLUMNS",
     "REASONS",
+    "RELATIVE_BEFORE_S",
     "IngestIssue",
     "IngestReport",
     "read_detection_records",
@@ -71,8 +85,11 @@ __all__ = [
     "write_detections_jsonl",
 ]
 
-#: CSV columns; the first seven are required.
+#: CSV columns written; the first seven are required (``time`` may stand for ``t``).
 CSV_COLUMNS = ("t", "sensor", "u_min", "v_min", "u_max", "v_max", "class", "score", "local_id")
+#: Times before this (UNIX seconds: 2000-01-01T00:00:00Z) in a file without an epoch look
+#: like session seconds: the report says so.
+RELATIVE_BEFORE_S = 946684800.0
 #: Reasons a record is skipped, in the order they are checked.
 REASONS = ("malformed", "nan", "unknown_class", "unknown_sensor", "outside_image", "time_backwards")
 
@@ -112,12 +129,20 @@ class IngestReport:
         Skipped records per reason (every reason present, possibly 0).
     examples : tuple of IngestIssue
         The first few skipped records of each reason, in file order.
+    epoch_s : float or None
+        The epoch the file declared (UNIX seconds, UTC), None when it declared none.
+    relative : bool
+        No epoch was declared and every accepted time is before 2000-01-01 as UNIX
+        seconds: the times were read as seconds after 1970-01-01T00:00:00Z, and are
+        most likely session seconds.
     """
 
     n_records: int
     n_accepted: int
     counts: dict[str, int] = field(default_factory=dict)
     examples: tuple[IngestIssue, ...] = ()
+    epoch_s: float | None = None
+    relative: bool = False
 
     @property
     def n_skipped(self) -> int:
@@ -129,6 +154,19 @@ class IngestReport:
         parts = [f"{k}={v}" for k, v in self.counts.items() if v]
         tail = f", skipped {self.n_skipped} ({', '.join(parts)})" if parts else ""
         return f"{self.n_accepted} of {self.n_records} detections accepted{tail}"
+
+    @property
+    def time_note(self) -> str:
+        """One line saying what the times are when not plain UTC clock times (else ``""``)."""
+        if self.epoch_s is not None:
+            return f"times: seconds after the declared epoch {format_utc(self.epoch_s)}"
+        if self.relative:
+            return (
+                "times look relative (no epoch declared, all before 2000):"
+                " read as seconds after 1970-01-01T00:00:00Z; declare the epoch"
+                " ('# epoch: <ISO 8601>' in CSV, {\"epoch\": ...} first in JSON Lines)"
+            )
+        return ""
 
 
 class _Skip(Exception):
@@ -146,7 +184,9 @@ class _Collector:
         sensors: Mapping[str, tuple[int, int]] | None,
         max_examples: int,
         edge_tolerance_px: float,
+        epoch_s: float | None = None,
     ) -> None:
+        self.epoch_s = epoch_s
         self.sensors = sensors
         self.max_examples = max_examples
         self.tol = edge_tolerance_px
@@ -208,12 +248,29 @@ class _Collector:
         # checked above as the constructor would (the record's numbers are floats already)
         return Detection._trusted(t, sensor, tuple(box), cls, score, rec["local_id"])  # type: ignore[arg-type]
 
+    def time_of(self, value: Any, name: str) -> float:
+        """A record's time (UNIX seconds): an ISO string, or a number after the epoch."""
+        if isinstance(value, str) and value.strip() and not _numeric(value):
+            try:
+                return parse_iso_time(value, name)
+            except TimeFormatError as err:
+                raise _Skip("malformed", str(err)) from None
+        t = _float(value, name)
+        return t if self.epoch_s is None else self.epoch_s + t
+
     def result(self) -> tuple[list[Detection], IngestReport]:
+        relative = (
+            self.epoch_s is None
+            and bool(self.accepted)
+            and all(d.t_s < RELATIVE_BEFORE_S for d in self.accepted)
+        )
         report = IngestReport(
             self.n_records,
             len(self.accepted),
             dict(self.counts),
             tuple(sorted(self.examples, key=lambda e: e.line)),
+            self.epoch_s,
+            relative,
         )
         return self.accepted, report
 
@@ -239,6 +296,22 @@ def _shown(value: Any) -> str:
             return f"an integer of {'over ' if digits >= 4000 else ''}{digits} digits"
     text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _numeric(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _epoch(text: str, where: str) -> float:
+    """The declared epoch (UNIX seconds) from its ISO text, or a one-line file error."""
+    try:
+        return parse_iso_time(text, "epoch")
+    except TimeFormatError as err:
+        raise InputFileError(f"{where}: {err}") from None
 
 
 def _float(value: Any, name: str) -> float:
@@ -290,19 +363,35 @@ def read_detections_csv(
     """
     col = _Collector(sensors, max_examples, edge_tolerance_px)
     with _open(source, "r") as fh:
-        reader = csv.reader(fh)
+        # Comment lines before the header: ``# epoch: <ISO 8601>`` declares the epoch.
+        n_before = 0
+        first = fh.readline()
+        while first.lstrip().startswith("#"):
+            n_before += 1
+            key, sep, value = first.lstrip()[1:].partition(":")
+            if sep and key.strip().lower() == "epoch":
+                col.epoch_s = _epoch(value.strip(), f"detection CSV line {n_before}")
+            first = fh.readline()
+        if not first:
+            raise InputFileError("detection CSV is empty (no header row)")
+        reader = csv.reader(itertools.chain([first], fh))
         try:
             header = [h.strip() for h in next(reader)]
         except StopIteration:
             raise InputFileError("detection CSV is empty (no header row)") from None
         except csv.Error as err:
             raise InputFileError(f"detection CSV header unreadable: {err}") from err
-        missing = [c for c in CSV_COLUMNS[:7] if c not in header]
+        required = [c for c in CSV_COLUMNS[:7] if c != "t"]
+        missing = [c for c in required if c not in header]
+        if "t" not in header and "time" not in header:
+            missing.insert(0, "t (or time)")
         if missing:
             raise InputFileError(
                 f"detection CSV lacks column(s) {', '.join(missing)}; header is {','.join(header)}"
             )
-        pos = {name: header.index(name) for name in CSV_COLUMNS if name in header}
+        if "t" in header and "time" in header:
+            raise InputFileError("detection CSV has both a t and a time column: keep one")
+        pos = {name: header.index(name) for name in (*CSV_COLUMNS, "time") if name in header}
         while True:
             try:
                 row = next(reader)
@@ -310,20 +399,20 @@ def read_detections_csv(
                 break
             except csv.Error as err:
                 col.n_records += 1
-                col.skip(reader.line_num, "malformed", f"unparsable CSV: {err}")
+                col.skip(reader.line_num + n_before, "malformed", f"unparsable CSV: {err}")
                 continue
             if not row or all(not c.strip() for c in row):
                 continue
-            line = reader.line_num
+            line = reader.line_num + n_before
             if len(row) != len(header):
                 col.n_records += 1
                 col.skip(line, "malformed", f"{len(row)} fields, header has {len(header)}")
                 continue
-            col.offer(line, functools.partial(_csv_record, row, pos))
+            col.offer(line, functools.partial(_csv_record, row, pos, col))
     return col.result()
 
 
-def _csv_record(row: list[str], pos: Mapping[str, int]) -> dict[str, Any]:
+def _csv_record(row: list[str], pos: Mapping[str, int], col: _Collector) -> dict[str, Any]:
     def cell(name: str) -> str:
         return row[pos[name]].strip() if name in pos else ""
 
@@ -332,8 +421,9 @@ def _csv_record(row: list[str], pos: Mapping[str, int]) -> dict[str, Any]:
         raise _Skip("malformed", "empty sensor")
     score = cell("score")
     local_id = cell("local_id")
+    t_name = "t" if "t" in pos else "time"
     return {
-        "t": _float(cell("t"), "t"),
+        "t": col.time_of(cell(t_name), t_name),
         "sensor": sensor,
         "bbox": [_float(cell(c), c) for c in ("u_min", "v_min", "u_max", "v_max")],
         "class": cell("class"),
@@ -355,10 +445,30 @@ def read_detections_jsonl(
     """
     col = _Collector(sensors, max_examples, edge_tolerance_px)
     with _open(source, "r") as fh:
+        first = True
         for line_no, text in enumerate(fh, start=1):
-            if text.strip():
-                col.offer(line_no, functools.partial(_json_record, text))
+            if not text.strip():
+                continue
+            if first:
+                first = False
+                epoch = _epoch_record(text)
+                if epoch is not None:
+                    col.epoch_s = _epoch(epoch, f"detection JSON Lines line {line_no}")
+                    continue
+            col.offer(line_no, functools.partial(_json_record, text, col))
     return col.result()
+
+
+def _epoch_record(text: str) -> str | None:
+    """The epoch text of a header record ``{"epoch": "..."}``; None for any other line."""
+    try:
+        obj = json.loads(text)
+    except json.JSONDecodeError:
+        return None
+    if isinstance(obj, dict) and set(obj) == {"epoch"}:
+        value = obj["epoch"]
+        return value if isinstance(value, str) else repr(value)
+    return None
 
 
 def read_detection_records(
@@ -367,32 +477,41 @@ def read_detection_records(
     sensors: Mapping[str, tuple[int, int]] | None = None,
     max_examples: int = 5,
     edge_tolerance_px: float = 1.0,
+    epoch_s: float | None = None,
 ) -> tuple[list[Detection], IngestReport]:
     """Check already parsed JSON records (dicts) with the JSON Lines rules.
 
     The same answer as :func:`read_detections_jsonl` on the records written one per line
     (an issue's ``line`` is the record's 1-based position), without the text round trip.
+    ``epoch_s`` (UNIX seconds) is the epoch of numeric ``t`` (a relative batch); None:
+    numeric ``t`` are UNIX seconds.
     """
-    col = _Collector(sensors, max_examples, edge_tolerance_px)
+    col = _Collector(sensors, max_examples, edge_tolerance_px, epoch_s)
     for line_no, obj in enumerate(records, start=1):
-        col.offer(line_no, functools.partial(_object_record, obj))
+        col.offer(line_no, functools.partial(_object_record, obj, col))
     return col.result()
 
 
-def _json_record(text: str) -> dict[str, Any]:
+def _json_record(text: str, col: _Collector) -> dict[str, Any]:
     try:
         obj = json.loads(text)
     except json.JSONDecodeError as err:
         raise _Skip("malformed", f"invalid JSON: {err.msg} at column {err.colno}") from None
-    return _object_record(obj)
+    return _object_record(obj, col)
 
 
-def _object_record(obj: Any) -> dict[str, Any]:
+def _object_record(obj: Any, col: _Collector) -> dict[str, Any]:
     if not isinstance(obj, dict):
         raise _Skip("malformed", f"a record must be a JSON object, got {type(obj).__name__}")
-    for key in ("t", "sensor", "bbox", "class"):
+    if "t" in obj and "time" in obj:
+        raise _Skip("malformed", "give t or time, not both")
+    t_name = "time" if "time" in obj else "t"
+    for key in (t_name, "sensor", "bbox", "class"):
         if key not in obj:
             raise _Skip("malformed", f"missing field {key!r}")
+    t_value = obj[t_name]
+    if t_name == "time" and not isinstance(t_value, str):
+        raise _Skip("malformed", f"time must be an ISO 8601 string, got {_shown(t_value)}")
     sensor, cls, box = obj["sensor"], obj["class"], obj["bbox"]
     if not isinstance(sensor, str) or not sensor:
         raise _Skip("malformed", f"sensor must be a non-empty string, got {sensor!r}")
@@ -407,7 +526,7 @@ def _object_record(obj: Any) -> dict[str, Any]:
         local_id = str(local_id)
     score = obj.get("score")
     return {
-        "t": _float(obj["t"], "t"),
+        "t": col.time_of(t_value, t_name),
         "sensor": sensor,
         "bbox": [_float(b, "bbox") for b in box],
         "class": cls,

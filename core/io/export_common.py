@@ -13,10 +13,11 @@ each point (EGM96 from its 15' grid, a national grid, or a stated constant); wit
 it is the ellipsoidal ``h``, and every file says so (:attr:`HeightModel.note`,
 :attr:`HeightModel.datum_name`).
 
-Times follow a :class:`TimeBase`: a point's time is ``epoch + t_s``. When the store's
-``t_s`` are UNIX seconds the epoch is 1970-01-01T00:00:00Z and the times are wall-clock
-times; when they are session seconds the epoch is declared (given by the caller or the
-UNIX epoch by default) and every file says the times are relative to it.
+Times follow a :class:`TimeBase`: a point's time is ``epoch + t_s``. demtrack's ``t_s``
+are UNIX seconds UTC, so the epoch is 1970-01-01T00:00:00Z and the times are real UTC
+clock times (``wall_clock``). Only for session seconds (an old store, a file without an
+epoch whose times are all before 2000: :meth:`TimeBase.for_times`) is the epoch merely
+declared, and then every file says the times are relative to it.
 """
 
 from __future__ import annotations
@@ -50,6 +51,8 @@ ToGeodetic = Callable[[float, float, float], tuple[float, float, float]]
 #: ``(lat_deg, lon_deg, h_m) -> H_m``: arrays of shape (n,) in, orthometric heights out.
 OrthometricFn = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 UNIX_EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
+#: UNIX seconds of 2000-01-01T00:00:00Z: times all before it are session seconds.
+_RELATIVE_BEFORE_S = 946684800.0
 
 
 def _check_epoch(epoch: datetime | None) -> None:
@@ -204,6 +207,20 @@ class TimeBase:
 
     def __post_init__(self) -> None:
         _check_epoch(self.epoch)
+
+    @classmethod
+    def for_times(cls, t_s: Sequence[float], epoch: datetime | None = None) -> TimeBase:
+        """The time base of UNIX seconds ``t_s`` (s, shape (n,)), or of a declared epoch.
+
+        With ``epoch`` the times are ``epoch + t_s``, declared (not clock readings).
+        Without one they are UNIX seconds: wall-clock times, unless every one is before
+        2000-01-01T00:00:00Z (946684800 s), which is session seconds read from 1970, and
+        the files then say so instead of claiming clock times.
+        """
+        if epoch is not None:
+            return cls(epoch, wall_clock=False)
+        relative = len(t_s) > 0 and max(t_s) < _RELATIVE_BEFORE_S
+        return cls(UNIX_EPOCH, wall_clock=not relative)
 
     def iso(self, t_s: float) -> str:
         """ISO 8601 UTC time of ``t_s`` (milliseconds, ``Z``)."""

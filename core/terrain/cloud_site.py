@@ -19,8 +19,8 @@ from typing import Any, Literal
 import numpy as np
 
 from ..errors import CrsError, InputFileError
-from ..geo.geoid import GeoidModel, as_geoid
 from ..geo.geodesy import LocalFrame, as_crs, cached_transformer, horizontal_crs, z_unit_m_of
+from ..geo.geoid import GeoidModel, as_geoid
 from .pointcloud import GROUND_CLASS, PointCloud
 
 __all__ = [

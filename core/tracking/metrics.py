@@ -174,7 +174,7 @@ def evaluate(
 
     t0 = min(float(t.t_s[0]) for t in truths)
     t1 = max(float(t.t_s[-1]) for t in truths)
-    times = np.arange(t0, t1 + 1e-9, dt_eval_s)
+    times = t0 + np.arange(0.0, t1 - t0 + 1e-9, dt_eval_s)  # relative: exact at UNIX times
     last_id: dict[int, int] = {}
     seen: dict[int, set[int]] = {t.target_id: set() for t in truths}
     switches = 0

@@ -25,6 +25,8 @@ def _run(args: argparse.Namespace) -> int:
     log = sys.stderr if args.json else sys.stdout
     detections, ingest = read_detections(args.detections, sensors=sensor_sizes(site))
     print(ingest.summary(), file=log)
+    if ingest.time_note:
+        print(ingest.time_note, file=log)
     fixes, report = build_fixes(site, detections)
     print(report.summary(), file=log)
     tracks = run_tracker(fixes, args.method, roads=site.roads)

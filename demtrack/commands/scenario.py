@@ -67,12 +67,15 @@ def _run(args: argparse.Namespace) -> int:
     if suffix not in (".csv", ".jsonl", ".ndjson"):
         raise InputFileError(f"unknown detection file type {suffix!r} (use .csv or .jsonl)")
     from demtrack.core.io.detections import write_detections_csv, write_detections_jsonl
+    from demtrack.core.io.times import format_utc
     from demtrack.core.site.folder import load_site
     from demtrack.samplesite.scenarios import make_scenario, write_truth_json
+    from demtrack.samplesite.stamping import parse_start, stamp_scenario
 
+    t0_s = parse_start(args.start)  # checked before the scenario is made: a quick status 2
     params = params_from_args(args)
     site = load_site(args.site)
-    sc = make_scenario(site, args.name, params)
+    sc = stamp_scenario(make_scenario(site, args.name, params), t0_s)
     if suffix == ".csv":
         write_detections_csv(out, sc.detections)
     else:
@@ -85,6 +88,7 @@ def _run(args: argparse.Namespace) -> int:
         f" ({s['detected']} of targets, {s['partly_hidden']} partly hidden, {s['hidden']} hidden,"
         f" {s['missed']} missed, {s['false_alarms']} false alarms) -> {out}"
     )
+    print(f"times: UTC from {format_utc(t0_s)} (t = UNIX seconds)")
     return 0
 
 
@@ -97,5 +101,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "-o", "--output", required=True, metavar="FILE", help="detections file (.jsonl or .csv)"
     )
     p.add_argument("--truth", metavar="FILE", help="also write the ground truth (JSON)")
+    p.add_argument(
+        "--start",
+        metavar="ISO8601",
+        default="now",
+        help="UTC time of the scenario's start, e.g. 2026-12-01T14:30:00Z (default now):"
+        " detections and truth carry real UNIX times from it",
+    )
     add_scenario_parameters(p)
     p.set_defaults(func=_run)

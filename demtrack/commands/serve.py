@@ -119,6 +119,13 @@ def add_live_arguments(p: argparse.ArgumentParser, *, replay_default: list[str])
         help="replay speed, times real time (default 1)",
     )
     p.add_argument(
+        "--start",
+        metavar="ISO8601",
+        default="now",
+        help="UTC time the replay starts at, e.g. 2026-12-01T14:30:00Z (default now):"
+        " replayed detections carry real times from it",
+    )
+    p.add_argument(
         "--viser-port",
         type=int,  # checked in live_overrides, with the option named
         default=8080,
@@ -137,9 +144,12 @@ def live_overrides(args: argparse.Namespace, replay_default: list[str]) -> dict[
         raise DemtrackError(f"--speed must be a positive number, got {args.speed}")
     if not 0 <= args.viser_port <= 65535:
         raise DemtrackError(f"--viser-port must be within 0..65535, got {args.viser_port}")
+    from demtrack.samplesite.stamping import parse_start
+
     replay = list(dict.fromkeys(args.replay)) if args.replay else list(replay_default)
     return {
         "replay": replay,
+        "replay_start_s": parse_start(args.start),
         "replay_speed": args.speed,
         "viser_host": args.host,
         "viser_port": args.viser_port,

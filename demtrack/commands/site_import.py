@@ -19,10 +19,10 @@ from .common import finite, non_negative, positive, positive_int
 
 if TYPE_CHECKING:
     from demtrack.core.camera.pinhole import Intrinsics
-    from demtrack.core.geo.geoid import GeoidModel
-    from demtrack.core.terrain.dem_import import DemImport
     from demtrack.core.camera.pose import SurveyedPose
+    from demtrack.core.geo.geoid import GeoidModel
     from demtrack.core.site.folder import Site
+    from demtrack.core.terrain.dem_import import DemImport
 
 __all__ = ["register"]
 

@@ -2,13 +2,14 @@
 
 The files are written by :mod:`demtrack.core.io.track_io`, the writers the server's
 ``/api/tracks/export`` uses: same heights (the site's geoid model, else ellipsoidal and
-said so) and times (``--epoch`` + t_s, else the UNIX epoch, declared in the file).
+said so) and times (real UTC from UNIX seconds; ``--epoch`` + t_s for session seconds,
+declared in the file).
 """
 
 from __future__ import annotations
 
 import argparse
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -23,17 +24,16 @@ if TYPE_CHECKING:
 
 __all__ = ["DEFAULT_METHOD", "register", "track_detections"]
 
+UNIX_EPOCH_DT = datetime(1970, 1, 1, tzinfo=UTC)
 SUFFIXES = (".geojson", ".json", ".csv", ".gpx", ".kml", ".kmz", ".gpkg")
 
 
 def _epoch(text: str | None) -> datetime | None:
     if text is None:
         return None
-    try:
-        when = datetime.fromisoformat(text.replace("Z", "+00:00"))
-    except ValueError:
-        raise InputFileError(f"--epoch must be an ISO 8601 time, got {text!r}") from None
-    return when if when.tzinfo is not None else when.replace(tzinfo=UTC)
+    from demtrack.core.io.times import parse_iso_time
+
+    return UNIX_EPOCH_DT + timedelta(seconds=parse_iso_time(text, "--epoch"))
 
 
 def track_detections(site: Site, detections_path: Path, method: str) -> list[Track]:
@@ -44,6 +44,8 @@ def track_detections(site: Site, detections_path: Path, method: str) -> list[Tra
 
     detections, ingest = read_detections(detections_path, sensors=sensor_sizes(site))
     print(ingest.summary())
+    if ingest.time_note:
+        print(ingest.time_note)
     fixes, report = build_fixes(site, detections)
     print(report.summary())
     return run_tracker(fixes, method, roads=site.roads)
@@ -55,7 +57,7 @@ def _run(args: argparse.Namespace) -> int:
     if suffix not in SUFFIXES:
         raise InputFileError(f"unknown track file type {suffix!r} (use {', '.join(SUFFIXES)})")
     epoch = _epoch(args.epoch)
-    from demtrack.core.io.track_io import TRACK_CSVT, UNIX_EPOCH, TimeBase, write_tracks
+    from demtrack.core.io.track_io import TRACK_CSVT, TimeBase, write_tracks
     from demtrack.core.site.folder import load_site
     from demtrack.server.track_export import site_heights
 
@@ -68,7 +70,9 @@ def _run(args: argparse.Namespace) -> int:
         return float(lat), float(lon), float(h)
 
     fmt = "geojson" if suffix == ".json" else suffix[1:]
-    times = TimeBase(epoch or UNIX_EPOCH)
+    # Real UTC when the times are UNIX seconds; session seconds (a declared --epoch, or
+    # all before 2000) are said to be relative in the file.
+    times = TimeBase.for_times([p.t_s for t in tracks for p in t.points], epoch)
     heights = site_heights(site)  # the server's rule: EGM96, else the site's N, else none
     write_tracks(fmt, out, tracks, to_geodetic, times=times, heights=heights)
     if fmt == "csv":
@@ -105,6 +109,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--epoch",
         metavar="ISO8601",
-        help="UTC time of t = 0 s, declared in the file (default 1970-01-01T00:00:00Z)",
+        help="for detections in session seconds: ISO 8601 time (with a zone) of t = 0 s,"
+        " declared in the file (default none: times are UNIX seconds, real UTC)",
     )
     p.set_defaults(func=_run)

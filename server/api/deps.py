@@ -10,6 +10,9 @@ from __future__ import annotations
 from typing import Annotated, Literal
 
 from fastapi import Depends, Query, Request
+from pydantic import BeforeValidator, ValidationInfo, WithJsonSchema
+
+from demtrack.core.io.times import parse_time_value
 
 from ..security import require_operator, require_reader
 from ..state import ConsoleState
@@ -21,6 +24,7 @@ __all__ = [
     "BBoxQuery",
     "StateDep",
     "TimeFrom",
+    "TimeQuery",
     "TimeTo",
     "TrackClass",
     "TrackSensor",
@@ -49,10 +53,25 @@ OPERATOR = (Depends(require_operator),)
 #: one raised ``OverflowError`` in the driver, an HTTP 500).
 SQLITE_INT_MAX = 2**63 - 1
 
-#: Start of a time window (session seconds, inclusive).
-TimeFrom = Annotated[float | None, Query(description="window start (s)", allow_inf_nan=False)]
-#: End of a time window (session seconds, inclusive).
-TimeTo = Annotated[float | None, Query(description="window end (s)", allow_inf_nan=False)]
+
+def _time_query(value: object, info: ValidationInfo) -> object:
+    """A time parameter as UNIX seconds: a number, or ISO 8601 with a zone (422 without)."""
+    if value is None:
+        return None
+    return parse_time_value(value, info.field_name or "time")
+
+
+#: A time query parameter's OpenAPI schema: UNIX seconds or an ISO 8601 string with a zone.
+_TIME_SCHEMA = WithJsonSchema(
+    {"anyOf": [{"type": "number"}, {"type": "string", "format": "date-time"}, {"type": "null"}]}
+)
+#: A time query parameter: UNIX seconds UTC, or ISO 8601 with a zone (``...Z``, ``+01:00``).
+TimeQuery = Annotated[float | None, BeforeValidator(_time_query), _TIME_SCHEMA]
+_WHEN = "UNIX seconds UTC, or ISO 8601 with a zone (2026-12-01T14:30:00Z)"
+#: Start of a time window (inclusive).
+TimeFrom = Annotated[TimeQuery, Query(description=f"window start: {_WHEN}")]
+#: End of a time window (inclusive).
+TimeTo = Annotated[TimeQuery, Query(description=f"window end: {_WHEN}")]
 #: A track class filter (``?class=``).
 TrackClass = Annotated[Literal["vehicle", "human"] | None, Query(alias="class")]
 #: Tracks seen by this sensor.

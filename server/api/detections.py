@@ -9,9 +9,10 @@ from starlette.concurrency import run_in_threadpool
 from starlette.responses import Response
 
 from .. import listing
+from ..ingest.validate import relative_to
 from ..json_response import json_response
 from ..models import DetectionBatch, IngestAck, StoredDetectionOut
-from .deps import OPERATOR, READER, SQLITE_INT_MAX, StateDep
+from .deps import OPERATOR, READER, SQLITE_INT_MAX, StateDep, TimeFrom, TimeTo
 from .errors import error_responses
 
 __all__ = ["router"]
@@ -36,7 +37,8 @@ async def ingest(batch: DetectionBatch, state: StateDep) -> dict[str, Any]:
     limit = state.settings.max_batch
     if len(batch.detections) > limit:
         raise HTTPException(413, f"batch has {len(batch.detections)} records; the limit is {limit}")
-    return await run_in_threadpool(state.pipeline.ingest, batch.detections, batch.batch_key)
+    records = relative_to(batch.detections, batch.epoch_s)
+    return await run_in_threadpool(state.pipeline.ingest, records, batch.batch_key)
 
 
 @router.get(
@@ -50,19 +52,15 @@ def list_detections(
     state: StateDep,
     after_id: int = Query(0, ge=0, le=SQLITE_INT_MAX, description="only ids above this"),
     limit: int = Query(1000, ge=1, le=10_000),
-    t_from: float | None = Query(
-        None, allow_inf_nan=False, description="only detections at or after this time (s)"
-    ),
-    t_to: float | None = Query(
-        None, allow_inf_nan=False, description="only detections at or before this time (s)"
-    ),
+    t_from: TimeFrom = None,
+    t_to: TimeTo = None,
     sensor: Annotated[
         list[str] | None, Query(description="only these sensors (repeatable)")
     ] = None,
 ) -> Response:
     """Stored detections in arrival (id) order, for paging with ``after_id``.
 
-    With a time window (``t_from`` and/or ``t_to``, session seconds, inclusive) or a
+    With a time window (``t_from`` and/or ``t_to``, UNIX seconds or ISO 8601, inclusive) or a
     ``sensor`` filter they come in time order instead (ties by id): the boxes of a past
     moment, which the console's camera panels show when the timeline is scrubbed back
     further than the fixes it holds. ``after_id`` still applies.

@@ -10,6 +10,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from .. import listing
 from ..listing import EVENT_KINDS
 from ..messages import EventBody
+from ..time_fields import event_with_times
 from .deps import StateDep, TimeFrom, TimeTo
 
 __all__ = ["EVENT_KINDS", "EventsOut", "router"]
@@ -35,12 +36,19 @@ _KIND = Query(
 _SENSOR = Query(None, description="only events one of these sensors saw (repeat)")
 
 
+class EventOut(EventBody):
+    """A stored event with its start and end as ISO 8601 UTC beside the UNIX seconds."""
+
+    time_utc: str = Field(description="t_start_s as ISO 8601 UTC with Z")
+    end_time_utc: str = Field(description="t_end_s as ISO 8601 UTC with Z")
+
+
 class EventsOut(BaseModel):
     """Events overlapping the window, by start time."""
 
     model_config = ConfigDict(extra="forbid")
 
-    events: list[EventBody]
+    events: list[EventOut]
     next_offset: int | None = Field(
         None, description="the offset of the next page; null when this is the last"
     )
@@ -68,4 +76,4 @@ def list_events(
     rows, nxt = listing.list_events(
         state, t_from, t_to, kind, track, open_only, limit, sensor, offset
     )
-    return {"events": rows, "next_offset": nxt}
+    return {"events": [event_with_times(r) for r in rows], "next_offset": nxt}

@@ -18,6 +18,9 @@ from fastapi import APIRouter, Path, Query
 from fastapi.responses import Response
 from pydantic import BaseModel, ConfigDict, Field
 
+from demtrack.core.errors import QueryError
+from demtrack.core.io.times import parse_iso_time
+
 from .. import markers
 from ..markers import MAX_T_S
 from ..messages import MarkerBody
@@ -33,11 +36,17 @@ class MarkerIn(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    t_s: float = Field(
+    t_s: float | None = Field(
+        None,
         ge=0,
         le=MAX_T_S,
         allow_inf_nan=False,
-        description="the moment it marks (UNIX s, UTC; up to 9999-12-31)",
+        description="the moment it marks (UNIX s, UTC; up to 9999-12-31); or give time",
+    )
+    time: str | None = Field(
+        None,
+        max_length=64,
+        description="the moment as ISO 8601 with a zone (2026-12-01T14:32:05Z), in place of t_s",
     )
     name: str = Field("", max_length=200, description="default M<id>")
     note: str = Field("", max_length=4000)
@@ -89,7 +98,13 @@ def list_markers(state: StateDep) -> dict[str, Any]:
 )
 def create_marker(state: StateDep, body: MarkerIn) -> dict[str, Any]:
     """Store a marker and stream it (``marker``, ``action: add``) to every console."""
-    return markers.create_marker(state, body.model_dump())
+    req = body.model_dump()
+    when = req.pop("time")
+    if (when is None) == (req["t_s"] is None):
+        raise QueryError("give the marker's moment as t_s (UNIX s) or time (ISO 8601), one of them")
+    if when is not None:
+        req["t_s"] = parse_iso_time(when, "time")
+    return markers.create_marker(state, req)
 
 
 _MARKER_ID = Path(ge=1, le=2**62)

@@ -15,7 +15,8 @@ from starlette.concurrency import run_in_threadpool
 
 from ..json_response import json_response
 from ..models import TracksOut
-from ..track_export import EXPORT_TYPES, export_bytes, parse_epoch, site_heights, time_base
+from ..time_fields import track_with_times
+from ..track_export import EXPORT_TYPES, export_bytes, parse_epoch, site_heights
 from ..track_query import filter_tracks, stored_track
 from .deps import BBoxQuery, StateDep, TimeFrom, TimeTo, TrackClass, TrackSensor
 
@@ -40,7 +41,8 @@ def list_tracks(
     """
     # Stored bodies have exactly TrackBody's keys (clip sets ``first_index``): encoded
     # as they are, without FastAPI validating every point against the model again.
-    return json_response({"tracks": filter_tracks(state, t_from, t_to, cls, sensor, bbox)})
+    bodies = filter_tracks(state, t_from, t_to, cls, sensor, bbox)
+    return json_response({"tracks": [track_with_times(b) for b in bodies]})
 
 
 @router.get(
@@ -71,8 +73,8 @@ async def export_tracks(
     epoch: str | None = Query(
         None,
         max_length=64,
-        description="ISO 8601 UTC time of t = 0 s, declared in the file"
-        " (default 1970-01-01T00:00:00Z: t_s read as UNIX seconds)",
+        description="ISO 8601 time with a zone of t = 0 s, declared in the file, for a"
+        " store of session seconds (default none: t_s are UNIX seconds, real UTC)",
     ),
 ) -> Response:
     """The tracks ``GET /api/tracks`` lists for the same filters, as a file.
@@ -82,10 +84,10 @@ async def export_tracks(
     and ``<ele>``), KML 2.2 / KMZ (a ``gx:Track`` per run, ``absolute`` altitudes) or
     GeoPackage (layers ``tracks`` and ``track_points``, EPSG:4979, R-tree index). Sea-level
     heights (KML, GPX ``ele``) use the site's geoid model; without one they are the
-    ellipsoidal heights, and the file says so. Times are ``epoch + t_s``, the epoch declared
-    in the file.
+    ellipsoidal heights, and the file says so. Times are real UTC (``t_s`` are UNIX
+    seconds); with ``epoch`` they are ``epoch + t_s``, the epoch declared in the file.
     """
-    when = time_base(parse_epoch(epoch))
+    when = parse_epoch(epoch)
     bodies = filter_tracks(state, t_from, t_to, cls, sensor, bbox)
     if track is not None:
         wanted = set(track)
@@ -103,4 +105,4 @@ async def export_tracks(
 @router.get("/{track_id}", response_model=TracksOut, summary="One track")
 def get_track(track_id: int, state: StateDep) -> dict[str, Any]:
     """One track with all its points."""
-    return {"tracks": [stored_track(state, track_id)]}
+    return {"tracks": [track_with_times(stored_track(state, track_id))]}

@@ -11,20 +11,22 @@ from typing import Any
 
 from demtrack.core.activity.kinds import EventKind
 from demtrack.core.geo.geodesy import LocalFrame
+from demtrack.core.io.times import clock_utc
 from demtrack.core.tracking.types import Track
 
 from .stream_messages import EventPayload, IngestPayload
 
 __all__ = ["EVENT_TEXT", "event_message", "ingest_message", "track_event"]
 
-#: The log line of each kind (``str.format`` fields: ids, zone, current, next, exit, cls).
+#: The log line of each kind (``str.format`` fields: ids, zone, current, next, exit, cls;
+#: ``exit`` is a UTC clock time, ``14:32:05Z``).
 EVENT_TEXT: dict[str, str] = {
     EventKind.LOITERING: "track {ids} loitering",
     EventKind.RENDEZVOUS: "tracks {ids} rendezvous",
     EventKind.CONVOY: "tracks {ids} in convoy",
     EventKind.ZONE_ENTER: "track {ids} entered {zone}",
     EventKind.ZONE_LEAVE: "track {ids} left {zone}",
-    EventKind.HANDOFF: "track {ids}: {current} loses it at {exit:.1f} s, next {next}",
+    EventKind.HANDOFF: "track {ids}: {current} loses it at {exit}, next {next}",
     EventKind.TRACK_CONFIRMED: "track {ids} ({cls}) confirmed",
     EventKind.TRACK_ENDED: "track {ids} ({cls}) ended",
 }
@@ -38,7 +40,7 @@ def event_message(body: dict[str, Any]) -> EventPayload:
         zone=d.get("zone", ""),
         current=d.get("current"),
         next=d.get("next_sensor"),
-        exit=d.get("exit_t_s") or 0.0,
+        exit=clock_utc(d["exit_t_s"]) if d.get("exit_t_s") is not None else "an unknown time",
         cls=d.get("cls", ""),
     )
     if body["state"] == "end":

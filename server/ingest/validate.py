@@ -15,10 +15,28 @@ from typing import Any
 from demtrack.core.io.detections import read_detection_records
 from demtrack.core.tracking.types import Detection
 
-__all__ = ["MAX_ISSUES", "validate_records"]
+__all__ = ["MAX_ISSUES", "relative_to", "validate_records"]
 
 #: The most issues an acknowledgement lists.
 MAX_ISSUES = 20
+
+
+def relative_to(records: Sequence[Any], epoch_s: float | None) -> list[Any]:
+    """``records`` with each numeric ``t`` moved to ``epoch_s + t`` (UNIX seconds).
+
+    A batch that declares an epoch: its numbers are seconds after it. Anything else
+    (an ISO ``time``, a record the reader will refuse) passes unchanged.
+    """
+    if epoch_s is None:
+        return list(records)
+    out: list[Any] = []
+    for r in records:
+        t = r.get("t") if isinstance(r, dict) else None
+        if isinstance(t, int | float) and not isinstance(t, bool) and abs(t) < 1e300:
+            out.append({**r, "t": epoch_s + float(t)})
+        else:
+            out.append(r)
+    return out
 
 
 def validate_records(

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from pyproj import CRS, Transformer
-
 from geoid_oracle import egm96_n
+from pyproj import CRS, Transformer
 
 from demtrack.cli import main
 from demtrack.core.geo.geoid import EGM96_GRID, find_grid

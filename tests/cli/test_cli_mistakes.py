@@ -154,6 +154,18 @@ MISTAKES: list[tuple[str, str]] = [
         "--false-alarms",
     ),
     ("scenario --site {site} --name nope -o {out}/s.jsonl", "--name"),
+    # times need a zone (issue 27): one line naming the option
+    (
+        "scenario --site {site} --name vehicle-run -o {out}/s.jsonl --start 2026-12-01T14:30",
+        "--start",
+    ),
+    ("scenario --site {site} --name vehicle-run -o {out}/s.jsonl --start noon", "--start"),
+    (
+        "track --site {site} --detections {f}/dets.jsonl -o {out}/t.geojson"
+        " --epoch 2026-12-01T14:30:00",
+        "--epoch '2026-12-01T14:30:00' has no zone",
+    ),
+    ("serve --site {site} --replay vehicle-run --start 2026-12-01", "--start"),
     ("scenario --site {site} --name vehicle-run -o {out}/s.xyz", "'.xyz'"),
     ("handoff --site {site} --lead 0", "--lead"),
     ("handoff --site {site} --scenario nope", "nope"),

@@ -13,7 +13,9 @@ from demtrack.samplesite.world import make_world
 def test_vehicle_run_gaps_are_explained(capsys, sample_site_dir, tmp_path):
     det = tmp_path / "dets.jsonl"
     site = str(sample_site_dir)
-    assert main(["scenario", "--site", site, "--name", "vehicle-run", "-o", str(det)]) == 0
+    # scenario time (t = 0 at the run's start, issue 27's --start): the spans below are in it
+    argv = ["scenario", "--site", site, "--name", "vehicle-run", "--start", "1970-01-01T00:00:00Z"]
+    assert main([*argv, "-o", str(det)]) == 0
     capsys.readouterr()
     assert main(["gaps", "--site", site, "--detections", str(det), "--json"]) == 0
     captured = capsys.readouterr()

@@ -19,12 +19,12 @@ pytestmark = pytest.mark.timeout(900)
 def test_track_writes_kml_geopackage_and_csv(capsys, sample_site_dir, tmp_path):
     det = tmp_path / "dets.jsonl"
     argv = ["scenario", "--site", str(sample_site_dir), "--name", "passing-vehicles"]
-    assert main([*argv, "-o", str(det)]) == 0
+    # Real times from the scenario's start (before issue 27: track --epoch on session seconds)
+    assert main([*argv, "--start", "2024-05-01T12:00:00Z", "-o", str(det)]) == 0
     counts = {}
     for suffix in (".kml", ".gpkg", ".csv"):
         out = tmp_path / f"tracks{suffix}"
         argv = ["track", "--site", str(sample_site_dir), "--detections", str(det)]
-        argv += ["--epoch", "2024-05-01T12:00:00Z"]
         assert main([*argv, "--method", "kalman", "-o", str(out)]) == 0
         text = capsys.readouterr().out
         assert f"-> {out}" in text

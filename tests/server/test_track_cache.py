@@ -26,6 +26,7 @@ from demtrack.server.synopsis import (
     trajectory_reference,
 )
 from demtrack.server.synopsis_models import SynopsisOut
+from demtrack.server.time_fields import track_with_times
 from demtrack.server.track_cache import TrackCache
 from demtrack.server.track_query import track_cache
 
@@ -54,7 +55,8 @@ def _ref_synopsis(store, t0, t1, step_s):
 
 
 def _ref_tracks(store, t_from, t_to):
-    out = {"tracks": _ref_bodies(store, t_from, t_to)}
+    # the answer carries each point's time_utc beside t_s (issue 27)
+    out = {"tracks": [track_with_times(b) for b in _ref_bodies(store, t_from, t_to)]}
     return TracksOut.model_validate(out).model_dump(mode="json")
 
 

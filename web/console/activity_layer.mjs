@@ -17,7 +17,7 @@
 // on animation frames when the events, the shown time, the window, the filters or the
 // selection changed.
 
-import { ACTIVITY_COLOUR, ACTIVITY_KINDS, fmtClock, KIND } from "./events.mjs";
+import { ACTIVITY_COLOUR, ACTIVITY_KINDS, fmtClock, KIND, zoneLabel } from "./events.mjs";
 import { SELECTED_COLOUR } from "./palette.mjs";
 import { selectEvent } from "./selection.mjs";
 import { eventVisible, store, timeline, ui } from "./state.mjs";
@@ -189,5 +189,5 @@ export function installActivityLayer(siteMap) {
 
 /** The episode's time span as clock time (the detail panel's header). */
 export function spanText(ev) {
-  return `${fmtClock(ev.t_s)}–${fmtClock(ev.t_end_s ?? ev.t_s)} UTC`;
+  return `${fmtClock(ev.t_s)}–${fmtClock(ev.t_end_s ?? ev.t_s)} ${zoneLabel(ev.t_s)}`;
 }

@@ -1,7 +1,8 @@
 // The selection panel: a track's history (times, sensors, speed profile) or a geolocation.
 
 import { classColour, SELECTED_COLOUR } from "./palette.mjs";
-import { el, fmt, fmtT } from "./util.mjs";
+import { fmtClock, zoneLabel } from "./clock.mjs";
+import { el, fmt } from "./util.mjs";
 
 /** When each sensor saw the track: {sensor: [[t0, t1], ...]}, breaks longer than `joinS` split. */
 export function sensorSpans(track, joinS = 2.0) {
@@ -68,9 +69,9 @@ export function drawSpeed(canvas, track, tNow) {
     g.fillText(`${(f * vmax).toFixed(f ? 1 : 0)}`, 4, Y(f * vmax) + (f === 1 ? 8 : 3));
   }
   g.fillText("speed, m/s", left + 4, 14);
-  g.fillText(fmtT(t0), left, h - 3);
+  g.fillText(fmtClock(t0, { digits: 0 }), left, h - 3);
   g.textAlign = "right";
-  g.fillText(fmtT(t1), w - 6, h - 3);
+  g.fillText(fmtClock(t1, { digits: 0 }), w - 6, h - 3);
   g.textAlign = "left";
   // Gaps shaded: no measurement there.
   g.fillStyle = "rgba(255,255,255,0.07)";
@@ -111,14 +112,14 @@ export function trackDetail(track, { following, onFollow, onExport, onClose }) {
       el("button", { onclick: onExport, title: "download this track as GeoJSON" }, "GeoJSON"),
       el("button", { onclick: onClose, title: "clear selection (Esc)" }, "✕")),
     el("table", { class: "kv" },
-      row("time", `${fmtT(t0)} → ${fmtT(t1)} (${fmt(t1 - t0, 1)} s)`),
+      row("time", `${fmtClock(t0, { withDate: true })} → ${fmtClock(t1)} ${zoneLabel(t0)} (${fmt(t1 - t0, 1)} s)`),
       row("points", `${pts.length}${track.n_points > pts.length ? ` of ${track.n_points}` : ""}`),
       row("path", `${fmt(length, 0)} m, mean ${fmt(vmean, 1)} m/s`),
-      row("hand-off gaps", (track.gaps || []).length ? track.gaps.map(([a, b]) => `${fmtT(a)}–${fmtT(b)}`).join(", ") : "none")),
+      row("hand-off gaps", (track.gaps || []).length ? track.gaps.map(([a, b]) => `${fmtClock(a)}–${fmtClock(b)}`).join(", ") : "none")),
     el("table", { class: "kv runs" },
       ...Object.keys(spans).sort().map((k) => {
         const list = spans[k];
-        const shown = list.slice(-4).map(([a, b]) => `${fmtT(a)}–${fmtT(b)}`).join(", ");
+        const shown = list.slice(-4).map(([a, b]) => `${fmtClock(a)}–${fmtClock(b)}`).join(", ");
         return row(k, list.length > 4 ? `… ${shown}` : shown);
       })),
     canvas,

@@ -14,6 +14,7 @@
 // annotation on a live track, one per track, replaced as it changes (`predictions`). It is
 // shown in the track's detail, never in the event list.
 
+import { fmtClock, zoneLabel } from "./clock.mjs";
 import { EVENT_PALETTE } from "./palette.mjs";
 import { firstT, lastT } from "./store.mjs";
 
@@ -72,21 +73,8 @@ export function eventColour(kind) {
   return EVENT_COLOURS[kind] || ACTIVITY_COLOUR;
 }
 
-/**
- * A time as clock time, UTC: "HH:MM:SS.s" (times inside are UNIX seconds, UTC;
- * docs/conventions.md). `withDate` prefixes the date when it is not 1970-01-01 (a
- * session replayed from t = 0).
- */
-export function fmtClock(t, { withDate = false, digits = 1 } = {}) {
-  if (t === null || t === undefined || !Number.isFinite(t)) return "–";
-  const ms = Math.round(t * 1000);
-  const d = new Date(ms);
-  if (Number.isNaN(d.getTime())) return "–";
-  const iso = d.toISOString(); // YYYY-MM-DDTHH:MM:SS.sssZ
-  const clock = iso.slice(11, digits > 0 ? 20 + Math.min(3, digits) : 19);
-  const date = iso.slice(0, 10);
-  return withDate && date !== "1970-01-01" ? `${date} ${clock}` : clock;
-}
+// Clock times (UTC, or local on request) are clock.mjs's; re-exported for older imports.
+export { fmtClock, zoneLabel };
 
 const ids = (list) => list.join(", ");
 const secs = (s) => (Number.isFinite(s) ? `${Math.round(s)} s` : "");
@@ -126,13 +114,14 @@ export function eventText(ev) {
   }
 }
 
-/** A hand-off prediction in words, its times as clock time: "cam1 loses it at 00:50:10.4
- * UTC, cam2 picks it up at 00:50:12.0 UTC". */
+/** A hand-off prediction in words, its times as clock time: "cam1 loses it at 14:50:10.4
+ * UTC; next cam2 at 14:50:12.0 UTC" (local time with its offset on request). */
 export function predictionText(p) {
   const d = p.details || {};
   const exit = fmtClock(d.exit_t_s);
-  const next = d.next_t_s === null || d.next_t_s === undefined ? "" : ` at ${fmtClock(d.next_t_s)} UTC`;
-  return `${d.current ?? "—"} loses it at ${exit} UTC; next ${d.next_sensor ?? "none"}${next}${d.slew ? " (slew)" : ""}`;
+  const zone = zoneLabel(d.exit_t_s);
+  const next = d.next_t_s === null || d.next_t_s === undefined ? "" : ` at ${fmtClock(d.next_t_s)} ${zone}`;
+  return `${d.current ?? "—"} loses it at ${exit} ${zone}; next ${d.next_sensor ?? "none"}${next}${d.slew ? " (slew)" : ""}`;
 }
 
 /**

@@ -10,7 +10,7 @@
 // annotations on their tracks (selection.mjs shows them in the track's detail).
 
 import * as api from "./api.mjs";
-import { fmtClock, KIND_LABEL, LISTED_KINDS, normEvent } from "./events.mjs";
+import { fmtClock, KIND_LABEL, LISTED_KINDS, normEvent, zoneLabel } from "./events.mjs";
 import { isSelected, select, selectEvent } from "./selection.mjs";
 import { eventVisible, store, timeline, trackList, ui, visible } from "./state.mjs";
 import { firstT, lastT } from "./store.mjs";
@@ -54,7 +54,7 @@ function drawTrackList() {
   list.replaceChildren(...tracks.map((tr) => el("div", {
     class: isSelected(tr.id) ? "sel" : "",
     "data-track": String(tr.id),
-    title: `sensors ${(tr.sensors || []).join(", ")}; ${fmtClock(firstT(tr))}–${fmtClock(lastT(tr))} UTC`,
+    title: `sensors ${(tr.sensors || []).join(", ")}; ${fmtClock(firstT(tr), { withDate: true })}–${fmtClock(lastT(tr))} ${zoneLabel(firstT(tr))}`,
     style: "flex-wrap:wrap;white-space:normal",
     onclick: () => select(tr.id),
   },
@@ -159,7 +159,7 @@ function drawEventList(t) {
     "data-kind": ev.kind,
     "data-key": ev.key || "",
     "data-t": String(ev.t_s),
-    title: `${ev.text} — ${fmtClock(ev.t_s, { withDate: true })} UTC`,
+    title: `${ev.text} — ${fmtClock(ev.t_s, { withDate: true })} ${zoneLabel(ev.t_s)}`,
     // wrap instead of cutting the row (the sidebar is narrow at 1280 px)
     style: `white-space:normal;flex-wrap:wrap;row-gap:0;align-items:baseline;${first + k === now ? "box-shadow:inset 3px 0 #ffe600;" : ""}`,
     onclick: () => {

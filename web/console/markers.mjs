@@ -11,7 +11,7 @@
 // centres the map on it; ✕ deletes it on the server (DELETE /api/markers/{id}).
 
 import * as api from "./api.mjs";
-import { fmtClock } from "./events.mjs";
+import { fmtClock, zoneLabel } from "./events.mjs";
 import { timeline, ui } from "./state.mjs";
 import { $, el, fmt } from "./util.mjs";
 
@@ -109,7 +109,7 @@ function editForm(m) {
       }
     },
   },
-  el("div", { class: "muted", text: `${m.name} · ${m.mgrs} · ${fmtClock(m.t_s)} UTC` }),
+  el("div", { class: "muted", text: `${m.name} · ${m.mgrs} · ${fmtClock(m.t_s, { withDate: true })} ${zoneLabel(m.t_s)}` }),
   el("div", { class: "row" }, name), el("div", { class: "row" }, note),
   el("div", { class: "row" }, el("button", { type: "submit", id: "marker-save" }, "Save"),
     el("button", { type: "button", onclick: () => form.remove() }, "Skip"), msg));
@@ -137,7 +137,7 @@ export function drawMarkers() {
     onclick: () => ui.map.centreOn(m.e_m, m.n_m),
   },
   el("b", { text: m.name }),
-  m.id < 0 ? el("span", { class: "muted", text: "saving…" }) : el("span", { class: "mono muted", text: `${fmtClock(m.t_s)} UTC` }),
+  m.id < 0 ? el("span", { class: "muted", text: "saving…" }) : el("span", { class: "mono muted", text: `${fmtClock(m.t_s)} ${zoneLabel(m.t_s)}` }),
   el("span", { class: "mono", "data-mgrs": "", text: m.mgrs }),
   m.utm ? el("span", { class: "mono muted", "data-utm": "", text: `UTM ${m.utm}` }) : null,
   el("span", { class: "mono muted", text: `${fmt(m.lat_deg, 6)}°, ${fmt(m.lon_deg, 6)}° · E ${fmt(m.e_m, 1)} N ${fmt(m.n_m, 1)}` }),

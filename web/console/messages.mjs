@@ -5,7 +5,7 @@ import * as api from "./api.mjs";
 import { applyPrediction, isPrediction, KIND, normEvent } from "./events.mjs";
 import { onMarkerMessage } from "./markers.mjs";
 import { store, ui } from "./state.mjs";
-import { fmtT } from "./util.mjs";
+import { fmtClock, zoneLabel } from "./clock.mjs";
 
 /** One stream message (stream.mjs hands them on one by one, in order). */
 export function onMessage(msg) {
@@ -20,7 +20,7 @@ export function onMessage(msg) {
   else if (msg.type === "sensor_status") {
     store.sensorStatus.set(msg.sensor, msg);
     const p = ui.cams.get(msg.sensor);
-    if (p) p.status.textContent = `${msg.n_detections} detections · last ${fmtT(msg.last_t_s)}`;
+    if (p) p.status.textContent = `${msg.n_detections} detections · last ${fmtClock(msg.last_t_s, { digits: 0 })} ${zoneLabel(msg.last_t_s)}`;
   }
   ui.dirty = true;
 }

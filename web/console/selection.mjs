@@ -11,7 +11,7 @@
 import * as api from "./api.mjs";
 import { askToken } from "./conn.mjs";
 import { drawSpeed, geoDetail, trackDetail } from "./detail.mjs";
-import { applyPrediction, fmtClock, KIND, predictions, predictionText } from "./events.mjs";
+import { applyPrediction, fmtClock, KIND, predictions, predictionText, zoneLabel } from "./events.mjs";
 import { downloadTracks } from "./export.mjs";
 import { keepMarker } from "./markers.mjs";
 import { store, timeline, ui } from "./state.mjs";
@@ -126,7 +126,7 @@ function eventHead(ev) {
       el("b", { text: ev.text }),
       el("span", { class: "grow" }),
       el("button", { onclick: clearSelection, title: "clear selection (Esc)" }, "✕")),
-    el("div", { class: "muted", text: `${fmtClock(ev.t_s)}${ev.t_end_s > ev.t_s ? `–${fmtClock(ev.t_end_s)}` : ""} UTC` }),
+    el("div", { class: "muted", text: `${fmtClock(ev.t_s, { withDate: true })}${ev.t_end_s > ev.t_s ? `–${fmtClock(ev.t_end_s)}` : ""} ${zoneLabel(ev.t_s)}` }),
     el("div", { class: "row" }, ...(ev.track_ids || []).map((id) => el("button", {
       class: id === ui.selectedId ? "on" : "",
       "data-track": String(id),
@@ -151,7 +151,7 @@ function predictionBlock(tr) {
   const text = !tr.live ? "none (track ended)" : p ? predictionText(p) : "none";
   const t = timeline.now();
   const age = p && tr.live
-    ? `predicted at ${fmtClock(p.t_s)} UTC${p.details?.exit_t_s < t ? " · its exit time has passed" : ""}`
+    ? `predicted at ${fmtClock(p.t_s)} ${zoneLabel(p.t_s)}${p.details?.exit_t_s < t ? " · its exit time has passed" : ""}`
     : null;
   return el("table", { class: "kv prediction" },
     el("tr", {}, el("th", { text: "hand-off (predicted)" }), el("td", { "data-prediction": p ? p.key : "", text })),

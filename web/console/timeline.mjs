@@ -2,9 +2,11 @@
 //
 // `live`: the shown time follows the newest data. Otherwise the shown time is `t`, which
 // advances at `speed` times real time while playing; playing into the newest data goes
-// live again. The label shows clock time (UTC; times inside are UNIX seconds).
+// live again. The label shows clock time with the date (UTC, or local time with its
+// offset after the UTC/local toggle; times inside are UNIX seconds), the scrubber's
+// tooltip the clock time under it.
 
-import { fmtClock } from "./events.mjs";
+import { clockMode, fmtClock, onClockChange, setLocalClock, zoneLabel } from "./clock.mjs";
 import { $ } from "./util.mjs";
 
 const PLAY_SVG = '<svg viewBox="0 0 16 16" width="14" height="14" aria-label="play"><polygon points="3,2 14,8 3,14" fill="currentColor"/></svg>';
@@ -23,7 +25,15 @@ export class Timeline {
     this.play = $("#play");
     this.scrub = $("#scrub");
     this.label = $("#t-label");
+    this.clockText = $("#t-clock");
+    this.dateText = $("#t-date");
     this.liveBtn = $("#go-live");
+    this.zoneBtn = $("#clock-zone");
+    this.zoneBtn.addEventListener("click", () => setLocalClock(!clockMode.local));
+    onClockChange(() => {
+      this.sync();
+      this.onChange();
+    });
     this.play.addEventListener("click", () => this.toggle());
     this.liveBtn.addEventListener("click", () => this.goLive());
     $("#speed").addEventListener("change", (e) => {
@@ -111,7 +121,14 @@ export class Timeline {
     this.scrub.max = String(b);
     const t = this.now();
     if (!this.scrubbing) this.scrub.value = String(t);
-    this.label.textContent = `${fmtClock(t)} / ${fmtClock(b)} UTC`; // clock time, never session seconds
+    // clock time with its date, never session seconds (the end: the newest data)
+    // Two lines: the shown clock time and its zone; the date and the newest data's time.
+    this.clockText.textContent = `${fmtClock(t)} ${clockMode.local ? "local" : "UTC"}`;
+    this.dateText.textContent = `${fmtClock(t, { date: true }).slice(0, 10)} · newest ${fmtClock(b, { digits: 0 })}`;
+    this.label.title = `shown ${fmtClock(t, { date: true, digits: 3 })} ${zoneLabel(t)}; newest data ${fmtClock(b, { date: true })}`;
+    this.scrub.title = `${fmtClock(t, { date: true })} ${zoneLabel(t)} (from ${fmtClock(a, { date: true, digits: 0 })})`;
+    this.zoneBtn.textContent = clockMode.local ? "local" : "UTC";
+    this.zoneBtn.classList.toggle("on", clockMode.local);
     const on = this.live || this.playing;
     if (this.play.dataset.on !== String(on)) {
       this.play.dataset.on = String(on);

@@ -1,4 +1,4 @@
-// Small shared helpers: number and time formatting, DOM shortcuts.
+// Small shared helpers: number formatting, DOM shortcuts (clock times: clock.mjs).
 
 // The colours live in palette.mjs (one meaning per colour); re-exported for older imports.
 export { CLASS_COLOURS, classColour, HIT_COLOUR, SELECTED_COLOUR } from "./palette.mjs";
@@ -17,16 +17,6 @@ export function el(tag, attrs = {}, ...children) {
   }
   for (const c of children) if (c !== null && c !== undefined) e.append(c);
   return e;
-}
-
-/** Session time as T+mm:ss.s (seconds since the session's start). */
-export function fmtT(t) {
-  if (t === null || t === undefined || !Number.isFinite(t)) return "–";
-  const sign = t < 0 ? "-" : "";
-  const a = Math.abs(t);
-  const m = Math.floor(a / 60);
-  const s = a - 60 * m;
-  return `${sign}${String(m).padStart(2, "0")}:${s.toFixed(1).padStart(4, "0")}`;
 }
 
 export function fmt(x, digits = 2) {

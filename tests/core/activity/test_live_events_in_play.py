@@ -68,7 +68,13 @@ def test_leaving_out_long_ended_tracks_changes_no_event(sample_site_dir, seed):
 @pytest.mark.parametrize("seed", range(3))
 def test_thinned_window_keeps_the_points_of_the_grid_rule(seed):
     """``_thin`` keeps, per ``sample_s`` grid time, the first point at or after it, and the
-    last point (the rule written out with ``np.unique``/``np.union1d``, as it first was)."""
+    last point (the rule written out with ``np.unique``/``np.union1d``, as it first was).
+
+    Since issue 27 the grid is on times relative to the window's first point, and a point
+    within 1 us of a grid time (or of the window's start) counts as on it: the same track
+    is thinned alike at t0 = 0 and at UNIX times (1.8e9 s), where float64's grain is
+    2.4e-7 s and an exact tie would be broken by rounding.
+    """
     from demtrack.server.live_events import _thin
 
     rng = np.random.default_rng(seed)
@@ -78,16 +84,24 @@ def test_thinned_window_keeps_the_points_of_the_grid_rule(seed):
     track = Track(
         7, "human", [TrackPoint(t[k], xyz[k], (f"cam{k % 3}",), (k,), None) for k in range(n)]
     )
-    for t_from, sample_s in [(0.0, 0.5), (t[n // 2], 0.3), (t[-1], 0.5), (t[5] + 1e-9, 1.0)]:
-        k0 = int(np.searchsorted(t, t_from))
+    shifted = Track(
+        7, "human", [TrackPoint(t[k] + 1.8e9, xyz[k], ("cam0",), (k,), None) for k in range(n)]
+    )
+    tol = 1e-6
+    for t_from, sample_s in [(0.0, 0.5), (t[n // 2], 0.3), (t[-1], 0.5), (t[5] + 1e-3, 1.0)]:
+        k0 = int(np.searchsorted(t, t_from - tol))
         tt = t[k0:]
-        grid = np.arange(tt[0], tt[-1] + sample_s, sample_s)
+        rel = tt - tt[0]
+        grid = np.arange(0.0, rel[-1] + sample_s, sample_s) - tol
         keep = np.union1d(
-            np.unique(np.minimum(np.searchsorted(tt, grid), len(tt) - 1)), [len(tt) - 1]
+            np.unique(np.minimum(np.searchsorted(rel, grid), len(tt) - 1)), [len(tt) - 1]
         )
         w = _thin(track, t_from, sample_s)
         assert w is not None
         np.testing.assert_array_equal(w.t_s, tt[keep])
         np.testing.assert_array_equal(w.p_enu, xyz[k0 + keep])
         assert w.sensors == tuple((f"cam{(k0 + k) % 3}",) for k in keep)
+        far = _thin(shifted, t_from + 1.8e9 if t_from else 0.0, sample_s)
+        assert far is not None
+        np.testing.assert_array_equal(far.index, w.index)  # the same points at UNIX times
     assert _thin(track, t[-1] + 1.0, 0.5) is None
