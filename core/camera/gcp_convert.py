@@ -42,7 +42,7 @@ import numpy as np
 
 from ..errors import CalibrationError, DemtrackError, InputFileError
 from ..geo.geodesy import as_crs
-from .gcp_io import LOCAL_CRS, GcpFile, read_gcp_csv
+from .gcp_io import LOCAL_CRS, GcpFile, read_gcp_csv, read_gcp_text
 from .pinhole import Camera, Intrinsics, rotation_from_azimuth_tilt_roll
 
 __all__ = [
@@ -79,12 +79,7 @@ def read_imgraft_gcps(path: str | Path) -> GcpFile:
         On a missing or non-text file, a line without exactly five numbers, or no points.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputFileError(f"GCP file not found: {path}") from None
-    except UnicodeDecodeError:
-        raise InputFileError(f"GCP file {path} is not UTF-8 text") from None
+    text = read_gcp_text(path)
     rows: list[list[float]] = []
     lines_no: list[int] = []
     for k, line in enumerate(text.splitlines(), start=1):

@@ -33,7 +33,7 @@ import numpy as np
 from ..errors import CalibrationError, DemtrackError, InputFileError
 from ..geo.geodesy import LocalFrame, as_crs
 
-__all__ = ["LOCAL_CRS", "Gcp", "GcpFile", "gcps_to_local", "read_gcp_csv"]
+__all__ = ["LOCAL_CRS", "Gcp", "GcpFile", "gcps_to_local", "read_gcp_csv", "read_gcp_text"]
 
 #: The ``crs`` value meaning "already in the site frame (e, n, u in metres)".
 LOCAL_CRS = "local"
@@ -82,6 +82,16 @@ class GcpFile:
     vertical: str | None
 
 
+def read_gcp_text(path: Path) -> str:
+    """The text of a GCP file; :class:`InputFileError` when missing or not UTF-8."""
+    try:
+        return path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputFileError(f"GCP file not found: {path}") from None
+    except UnicodeDecodeError:
+        raise InputFileError(f"GCP file {path} is not UTF-8 text") from None
+
+
 def read_gcp_csv(path: str | Path) -> GcpFile:
     """Parse a GCP CSV file (see the module notes).
 
@@ -91,12 +101,7 @@ def read_gcp_csv(path: str | Path) -> GcpFile:
         On a missing file, missing columns, non-numeric or non-finite values, or no rows.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputFileError(f"GCP file not found: {path}") from None
-    except UnicodeDecodeError:
-        raise InputFileError(f"GCP file {path} is not UTF-8 text") from None
+    text = read_gcp_text(path)
     crs = vertical = None
     body = []
     for line in text.splitlines():

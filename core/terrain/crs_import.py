@@ -56,6 +56,26 @@ _HULL_TOL_PX = 1e-6  # round-off allowance at the hull of source cell centres
 # --------------------------------------------------------------------------- sampling
 
 
+def _centre_index(
+    col_c: Any, row_c: Any, nr: int, nc: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centre-index coordinates clipped to the hull of cell centres, and which are inside.
+
+    The centre of cell (r, c) sits at (c, r); inside means within the tolerance.
+    """
+    gx = np.asarray(col_c, dtype=np.float64) - 0.5
+    gy = np.asarray(row_c, dtype=np.float64) - 0.5
+    inside = (
+        (gx >= -_HULL_TOL_PX)
+        & (gx <= nc - 1 + _HULL_TOL_PX)
+        & (gy >= -_HULL_TOL_PX)
+        & (gy <= nr - 1 + _HULL_TOL_PX)
+    )
+    gx = np.clip(np.where(inside, gx, 0.0), 0.0, nc - 1)
+    gy = np.clip(np.where(inside, gy, 0.0), 0.0, nr - 1)
+    return gx, gy, inside
+
+
 def bilinear_at_centres(
     values: np.ndarray, transform: Affine, x: np.ndarray, y: np.ndarray
 ) -> np.ndarray:
@@ -79,17 +99,7 @@ def bilinear_at_centres(
     v = values[None] if values.ndim == 2 else values
     nb, nr, nc = v.shape
     col_c, row_c = ~transform @ (np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64))
-    # Centre-index coordinates: the centre of cell (r, c) sits at (c, r).
-    gx = np.asarray(col_c) - 0.5
-    gy = np.asarray(row_c) - 0.5
-    inside = (
-        (gx >= -_HULL_TOL_PX)
-        & (gx <= nc - 1 + _HULL_TOL_PX)
-        & (gy >= -_HULL_TOL_PX)
-        & (gy <= nr - 1 + _HULL_TOL_PX)
-    )
-    gx = np.clip(np.where(inside, gx, 0.0), 0.0, nc - 1)
-    gy = np.clip(np.where(inside, gy, 0.0), 0.0, nr - 1)
+    gx, gy, inside = _centre_index(col_c, row_c, nr, nc)
     c0 = np.minimum(np.floor(gx).astype(np.int64), max(nc - 2, 0))
     r0 = np.minimum(np.floor(gy).astype(np.int64), max(nr - 2, 0))
     c1 = np.minimum(c0 + 1, nc - 1)
@@ -161,15 +171,7 @@ def resample_at_centres(
         for b in range(nb):
             out[b] = np.where(inside, v[b][r, c], np.nan)
         return out[0] if values.ndim == 2 else out
-    gx, gy = col_c - 0.5, row_c - 0.5
-    inside = (
-        (gx >= -_HULL_TOL_PX)
-        & (gx <= nc - 1 + _HULL_TOL_PX)
-        & (gy >= -_HULL_TOL_PX)
-        & (gy <= nr - 1 + _HULL_TOL_PX)
-    )
-    gx = np.clip(np.where(inside, gx, 0.0), 0.0, nc - 1)
-    gy = np.clip(np.where(inside, gy, 0.0), 0.0, nr - 1)
+    gx, gy, inside = _centre_index(col_c, row_c, nr, nc)
     c1 = np.floor(gx).astype(np.int64)
     r1 = np.floor(gy).astype(np.int64)
     fx, fy = gx - c1, gy - r1

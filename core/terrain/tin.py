@@ -40,7 +40,7 @@ from ..errors import DemError
 from .dem import Dem
 from .grid import GridSpec
 
-__all__ = ["Coverage", "TinGrid", "bilinear_fit", "grid_points_tin", "tin_at"]
+__all__ = ["Coverage", "TinGrid", "bilinear_fit", "grid_cloud", "grid_points_tin", "tin_at"]
 
 _CG_RTOL = 1e-10
 _CG_MAXITER = 2000
@@ -344,3 +344,31 @@ def grid_points_tin(
         filled=interpolated,
     )
     return TinGrid(dem, Coverage.of(dem))
+
+
+def grid_cloud(
+    xyz: np.ndarray,
+    cell_m: float,
+    *,
+    interpolate: Literal["tin", "none"],
+    surface: Literal["dtm", "dsm"] = "dtm",
+    bounds: tuple[float, float, float, float] | None = None,
+    crs_wkt: str | None = None,
+) -> Dem:
+    """A DEM of a point cloud: a terrain (mean) or surface (highest) model, TIN or not.
+
+    ``interpolate="tin"``: :func:`grid_points_tin` (a fit for a terrain model, the
+    highest point per cell and a TIN between for a surface model); ``"none"``: the
+    per-cell statistics only (:meth:`Dem.from_points`), holes where no point falls.
+    """
+    if interpolate == "none":
+        return Dem.from_points(xyz, cell_m, bounds=bounds, crs_wkt=crs_wkt)
+    dsm = surface == "dsm"
+    return grid_points_tin(
+        xyz,
+        cell_m,
+        bounds=bounds,
+        crs_wkt=crs_wkt,
+        statistic="max" if dsm else "mean",
+        method="sample" if dsm else "fit",
+    ).dem

@@ -96,20 +96,16 @@ def _run(args: argparse.Namespace) -> int:
             "the points' CRS is missing: pass --site DIR (points in the site frame, "
             "or with --crs converted into it) or --crs EPSG:XXXX"
         )
-    if args.interpolate == "tin":
-        from demtrack.core.terrain.tin import grid_points_tin
+    from demtrack.core.terrain.tin import grid_cloud
 
-        dsm = args.surface == "dsm"
-        dem = grid_points_tin(
-            pts,
-            cell,
-            bounds=bounds,
-            crs_wkt=crs_wkt,
-            statistic="max" if dsm else "mean",
-            method="sample" if dsm else "fit",
-        ).dem
-    else:
-        dem = Dem.from_points(pts, cell, bounds=bounds, crs_wkt=crs_wkt)
+    dem = grid_cloud(
+        pts,
+        cell,
+        interpolate="tin" if args.interpolate == "tin" else "none",
+        surface="dsm" if args.surface == "dsm" else "dtm",
+        bounds=bounds,
+        crs_wkt=crs_wkt,
+    )
     if args.site is None:
         # Heights stay those of the points: say so instead of claiming the site's datum.
         dem = dataclasses.replace(dem, vertical_datum=vertical_datum)

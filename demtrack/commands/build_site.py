@@ -77,9 +77,8 @@ def run_new_site(args: argparse.Namespace) -> int:
     from demtrack.core.site.update import new_manifest, write_dem_atomic, write_manifest
     from demtrack.core.terrain.cloud_site import anchor_for_cloud, cloud_crs, select_surface
     from demtrack.core.terrain.crs_import import local_crs_wkt, points_to_local
-    from demtrack.core.terrain.dem import Dem
     from demtrack.core.terrain.pointcloud import read_point_cloud
-    from demtrack.core.terrain.tin import Coverage, grid_points_tin
+    from demtrack.core.terrain.tin import Coverage, grid_cloud
 
     geoid, grid_file = _check_options(args)
     n_geoid = geoid if args.vertical_datum == "orthometric" else 0.0
@@ -100,18 +99,9 @@ def run_new_site(args: argparse.Namespace) -> int:
     pts = np.column_stack([e, n, u])
     bounds = tuple(args.bounds) if args.bounds else None
     wkt = local_crs_wkt(frame)
-    dsm = surface == "dsm"
-    if interpolate == "tin":
-        dem = grid_points_tin(
-            pts,
-            cell,
-            bounds=bounds,
-            crs_wkt=wkt,
-            statistic="max" if dsm else "mean",
-            method="sample" if dsm else "fit",
-        ).dem
-    else:
-        dem = Dem.from_points(pts, cell, bounds=bounds, crs_wkt=wkt)
+    dem = grid_cloud(
+        pts, cell, interpolate=interpolate, surface=surface, bounds=bounds, crs_wkt=wkt
+    )
     if dem.nodata.all():
         raise InputFileError(f"{args.points}: no point falls inside --bounds {bounds}")
     try:
@@ -160,7 +150,11 @@ def run_new_site(args: argparse.Namespace) -> int:
         f"height unit {crs.z_unit_m:.10g} m; heights {datum}"
     )
     density = len(pts) / area_m2 if area_m2 > 0 else float("nan")
-    kind = "DTM: ground points (class 2)" if not dsm else "DSM: first returns, highest per cell"
+    kind = (
+        "DTM: ground points (class 2)"
+        if surface != "dsm"
+        else "DSM: first returns, highest per cell"
+    )
     print(
         f"  {kind}: {len(pts):,} points, {density:.2f} per m^2 over their hull; "
         f"interpolate {interpolate}"
