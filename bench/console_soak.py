@@ -220,12 +220,16 @@ def replay_server(
     duration_s: float,
     scenarios: tuple[str, ...] = SCENARIOS,
     events: bool = True,
+    start: str | None = None,
 ) -> ServeProcess:
     """A (not yet started) ``demtrack serve`` replaying ``scenarios`` for ``duration_s``.
 
-    ``events=False`` turns the live activity detectors off (``DEMTRACK_EVENTS``).
+    ``events=False`` turns the live activity detectors off (``DEMTRACK_EVENTS``);
+    ``start``: the replay's first UTC time (ISO 8601; default now, as ``serve`` has it).
     """
     args = [a for name in scenarios for a in ("--replay", name)] + ["--speed", str(speed)]
+    if start is not None:
+        args += ["--start", start]
     env = {
         "DEMTRACK_REPLAY_COPIES": str(copies),
         "DEMTRACK_REPLAY_RATE_HZ": str(rate_hz),

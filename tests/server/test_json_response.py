@@ -18,6 +18,7 @@ from fastapi.testclient import TestClient
 from pydantic import TypeAdapter
 from server_helpers import AUTH, make_app, post_in_time_batches, walk
 
+from demtrack.core.io.times import format_utc
 from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import make_scenario
 from demtrack.server.json_response import json_response
@@ -25,6 +26,7 @@ from demtrack.server.models import StoredDetectionOut, TracksOut
 from demtrack.server.store.codec import encode_json
 from demtrack.server.synopsis import synopsis
 from demtrack.server.synopsis_models import SynopsisOut
+from demtrack.server.time_fields import track_with_times
 from demtrack.server.track_query import filter_tracks
 
 pytestmark = pytest.mark.timeout(600)
@@ -97,14 +99,17 @@ def test_tracks_are_what_fastapi_sent(fed, params):
     state = fed.app.state.console
     got = _get(fed, "/api/tracks", params)
     old = {
-        "tracks": filter_tracks(
-            state,
-            params.get("t_from"),
-            params.get("t_to"),
-            params.get("class"),
-            params.get("sensor"),
-            params.get("bbox"),
-        )
+        "tracks": [
+            track_with_times(t)  # the answer's ISO time beside every point's t_s
+            for t in filter_tracks(
+                state,
+                params.get("t_from"),
+                params.get("t_to"),
+                params.get("class"),
+                params.get("sensor"),
+                params.get("bbox"),
+            )
+        ]
     }
     assert_same_json(got, fastapi_json(TracksOut, old))
 
@@ -193,6 +198,7 @@ def _old_detections(state, params: dict[str, Any]) -> list[dict[str, Any]]:
         {
             "id": i,
             "t": d.t_s,
+            "time_utc": format_utc(d.t_s),
             "sensor": d.sensor,
             "bbox": d.bbox,
             "cls": d.cls,

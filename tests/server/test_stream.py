@@ -7,6 +7,7 @@ import pytest
 from pydantic import TypeAdapter
 from server_helpers import AUTH, TOKEN, walk
 
+from demtrack.core.io.times import format_utc
 from demtrack.server.hub import OVERFLOW, Hub
 from demtrack.server.messages import ServerMessage
 
@@ -84,6 +85,10 @@ def test_track_updates_rebuild_the_stored_tracks(client):
             pts.extend(t["points"])
             assert len(pts) == t["n_points"]
     stored = client.get("/api/tracks", headers=AUTH).json()["tracks"]
+    # the HTTP answer adds each point's ISO time (time_utc) beside the t_s streamed
+    for t in stored:
+        for p in t["points"]:
+            assert p.pop("time_utc") == format_utc(p["t_s"])
     assert stored and {t["id"]: t["points"] for t in stored} == rebuilt
 
 

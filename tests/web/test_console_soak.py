@@ -13,6 +13,7 @@ collection is within its cap; the track count shown is the API's. No timing asse
 from __future__ import annotations
 
 import json
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +25,9 @@ from demtrack.bench.console_soak import page_state, replay_server
 pytestmark = pytest.mark.timeout(900)
 
 DURATION_S = 90.0
+#: The replay's first time (UTC): scenario time 0 is stamped there.
+START = "2026-12-01T14:30:00Z"
+T0 = datetime(2026, 12, 1, 14, 30, tzinfo=UTC).timestamp()
 #: Lowered caps (the defaults are far beyond what 90 s of replay reaches).
 CAPS = {"pointsPerTrack": 150, "fixesPerSensor": 60, "events": 5, "detToTrack": 800}
 
@@ -38,6 +42,7 @@ def soak_server(sample_site_dir: Path, tmp_path: Path):
         copies=2,
         rate_hz=10.0,
         duration_s=DURATION_S,
+        start=START,
     )
     srv.start()
     try:
@@ -68,7 +73,7 @@ def _settled(page: Any, api: Any, timeout_s: float = 600.0) -> int:
     """
     deadline = page.evaluate("performance.now()") + 1000 * timeout_s
     last = -1
-    end = {"t_from": DURATION_S - 1.0, "limit": 1}
+    end = {"t_from": T0 + DURATION_S - 1.0, "limit": 1}
     while page.evaluate("performance.now()") < deadline:
         seq = api.get("/api/health").json()["last_seq"]
         if seq == last and api.get("/api/detections", params=end).json():
@@ -99,7 +104,7 @@ def test_busy_replay_streams_without_gaps_and_stays_within_caps(soak_server, pag
     assert [m["seq"] for m in stored] == list(range(1, seq + 1))
     # The replay reached its scenario end, with several tracks and cut by the caps.
     fix_msgs = [m["fix"] for m in stored if m["type"] == "fix"]
-    assert DURATION_S - 1.0 < max(f["t_s"] for f in fix_msgs) < DURATION_S
+    assert T0 + DURATION_S - 1.0 < max(f["t_s"] for f in fix_msgs) < T0 + DURATION_S
     assert len(tracks) >= 8
     assert max(len(t["points"]) for t in tracks) > CAPS["pointsPerTrack"]
     # The page's tracks are the API's; each holds the API's newest points up to the cap.
