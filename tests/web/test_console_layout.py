@@ -60,6 +60,12 @@ def test_filters_tracks_events_and_every_camera_stay_in_view(browser, fed_server
             assert inside(top, left) and inside(top, view), (pane, top)
         assert rect(page, "#pane-events > summary")["y"] < rect(page, "#pane-layers > summary")["y"]
         assert rect(page, "#pane-events #event-list")["y"] < h
+        # Every timeline control sits inside the bar (none spills onto the camera column).
+        bar = rect(page, "#timeline")
+        assert bar["x"] + bar["width"] <= rect(page, "#cameras")["x"] + 0.5, bar
+        for ctl in ("#play", "#speed", "#scrub", "#t-label", "#clock-zone", "#go-live",
+                    "#syn-on", "#syn-window"):  # fmt: skip
+            assert inside(rect(page, ctl), bar), (ctl, rect(page, ctl), bar)
         # Each pane folds.
         page.locator("#pane-tracks > summary").click()
         assert page.evaluate("document.querySelector('#pane-tracks').open") is False
