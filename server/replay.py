@@ -389,8 +389,9 @@ class Replay:
             # The next batch waits out the interval, unless this one left due frames behind
             # (max_coalesce): those go at once, or the interval would cap the pace.
             behind = frame is not None and due(frame) <= now
-            next_send = -math.inf if behind else now + self.min_interval_s
             records = [r for f in batch for r in f.records]
+            # The interval runs from the send itself, not from the batch's assembly.
+            next_send = -math.inf if behind else self.clock() + self.min_interval_s
             ack = self.send(records)
             self.n_batches += 1
             self.n_frames += len(batch)

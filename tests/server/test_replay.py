@@ -118,7 +118,8 @@ def test_replay_batches_the_frames_due_within_its_interval():
     assert replay.stop() and replay.error is None
     assert [r["t"] for _, recs in sends for r in recs] == [f.t_s for f in frames]
     times = [t for t, _ in sends]
-    assert all(b - a >= 0.25 for a, b in itertools.pairwise(times))
+    # (the send's own clock reading can trail the replay's by a thread switch: 50 ms slack)
+    assert all(b - a >= 0.25 - 0.05 for a, b in itertools.pairwise(times))
     assert all(t - t_start >= recs[-1]["t"] for t, recs in sends)  # nothing sent early
     assert 2 <= replay.n_batches <= 9 and replay.n_frames == 200
 

@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from pyproj import Transformer
+from weitsicht_data import WEITSICHT_DIR
 
 from demtrack.core.camera.gcp_io import Gcp, GcpFile, gcps_to_local
 from demtrack.core.camera.pinhole import Camera, Intrinsics
@@ -27,7 +27,7 @@ from demtrack.core.geo.geodesy import LocalFrame
 from demtrack.core.terrain.dem import Dem
 from demtrack.core.terrain.dem_import import grid_over, import_dem
 
-DATA = Path("/work/shared/data/weitsicht")
+DATA = WEITSICHT_DIR
 CRS = "EPSG:28355"
 
 

@@ -8,14 +8,12 @@ surface and cuts ridges; finer cells and cubic resampling cut less (docs/site-fo
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
-
 import numpy as np
 import pytest
 import rasterio
 from pyproj import Transformer
 from scipy.interpolate import RegularGridInterpolator
+from weitsicht_data import WEITSICHT_DIR
 
 from demtrack.core.terrain.dem_import import (
     import_dem,
@@ -25,18 +23,10 @@ from demtrack.core.terrain.dem_import import (
 )
 from demtrack.core.terrain.grid import GridSpec
 
-_REPO = Path(__file__).resolve().parents[3]
-_CANDIDATES = [
-    Path(p) / "dem_01_gda94_mga55_ahd.tif"
-    for p in (
-        os.environ.get("DEMTRACK_WEITSICHT", ""),
-        _REPO.parent / "shared" / "data" / "weitsicht",
-        _REPO.parent.parent / "shared" / "data" / "weitsicht",
-    )
-    if p
-]
-DEM = next((c for c in _CANDIDATES if c.is_file()), _CANDIDATES[-1])
-pytestmark = pytest.mark.skipif(not DEM.is_file(), reason="weitsicht data not present")
+DEM = WEITSICHT_DIR / "dem_01_gda94_mga55_ahd.tif"
+pytestmark = pytest.mark.skipif(
+    not DEM.is_file(), reason=f"weitsicht data not present ({WEITSICHT_DIR})"
+)
 
 
 @pytest.fixture(scope="module")
