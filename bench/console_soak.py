@@ -36,6 +36,7 @@ import math
 import tempfile
 import time
 from dataclasses import asdict, dataclass
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -242,6 +243,7 @@ def replay_server(
 def _soak(args: argparse.Namespace, site: Path, tmp: Path) -> tuple[list[Sample], dict]:
     from playwright.sync_api import sync_playwright
 
+    start_s = float(math.floor(time.time()))  # the replay's scenario time 0 (UTC)
     server = replay_server(
         site,
         tmp / "soak.sqlite3",
@@ -251,6 +253,7 @@ def _soak(args: argparse.Namespace, site: Path, tmp: Path) -> tuple[list[Sample]
         rate_hz=args.rate_hz,
         duration_s=args.duration,
         events=not args.no_events,
+        start=datetime.fromtimestamp(start_s, UTC).isoformat().replace("+00:00", "Z"),
     ).start()
     samples: list[Sample] = []
     final: dict[str, Any] = {}
@@ -343,8 +346,8 @@ def _soak(args: argparse.Namespace, site: Path, tmp: Path) -> tuple[list[Sample]
                 )
                 print(_row(samples[-1]), flush=True)
                 prev = cur
-                # A fresh store: the page's times are the replay's.
-                t_abs, end = float(st["tMax"]), args.duration - 1.0
+                # A fresh store: the page's times are the replay's, stamped from start_s.
+                t_abs, end = float(st["tMax"]), start_s + args.duration - 1.0
                 if t_abs >= end or wall >= max_wall or _replay_ended(samples):
                     break
                 # Watch for the end only when it may come before the next sample.
