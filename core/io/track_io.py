@@ -34,7 +34,7 @@ import io
 import json
 import os
 import tempfile
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import datetime
@@ -384,6 +384,17 @@ def write_tracks_gpkg(
     write_gpkg(path, prepared, hm, tb, include_points=include_points)
 
 
+#: The writer of each format (text ones take a file or a text stream, binary ones a path).
+_WRITERS: dict[str, Callable[..., None]] = {
+    "geojson": write_tracks_geojson,
+    "csv": write_tracks_csv,
+    "gpx": write_tracks_gpx,
+    "kml": write_tracks_kml,
+    "kmz": write_tracks_kmz,
+    "gpkg": write_tracks_gpkg,
+}
+
+
 def write_tracks(
     fmt: str,
     path: str | os.PathLike[str],
@@ -396,19 +407,7 @@ def write_tracks(
     """Write ``tracks`` to ``path`` in format ``fmt`` (a key of :data:`TRACK_FORMATS`)."""
     if fmt not in TRACK_FORMATS:
         raise TrackingError(f"unknown track format {fmt!r} (use {', '.join(TRACK_FORMATS)})")
-    kw: dict[str, Any] = {"times": times, "heights": heights}
-    if fmt == "geojson":
-        write_tracks_geojson(path, tracks, to_geodetic, **kw)
-    elif fmt == "csv":
-        write_tracks_csv(path, tracks, to_geodetic, **kw)
-    elif fmt == "gpx":
-        write_tracks_gpx(path, tracks, to_geodetic, **kw)
-    elif fmt == "kml":
-        write_tracks_kml(path, tracks, to_geodetic, **kw)
-    elif fmt == "kmz":
-        write_tracks_kmz(path, tracks, to_geodetic, **kw)
-    else:
-        write_tracks_gpkg(path, tracks, to_geodetic, **kw)
+    _WRITERS[fmt](path, tracks, to_geodetic, times=times, heights=heights)
 
 
 def track_file_bytes(
@@ -428,13 +427,5 @@ def track_file_bytes(
             write_tracks(fmt, path, tracks, to_geodetic, times=times, heights=heights)
             return path.read_bytes()
     buf = io.StringIO()
-    kw: dict[str, Any] = {"times": times, "heights": heights}
-    if fmt == "geojson":
-        write_tracks_geojson(buf, tracks, to_geodetic, **kw)
-    elif fmt == "csv":
-        write_tracks_csv(buf, tracks, to_geodetic, **kw)
-    elif fmt == "gpx":
-        write_tracks_gpx(buf, tracks, to_geodetic, **kw)
-    else:
-        write_tracks_kml(buf, tracks, to_geodetic, **kw)
+    _WRITERS[fmt](buf, tracks, to_geodetic, times=times, heights=heights)
     return buf.getvalue().encode("utf-8")
