@@ -173,11 +173,7 @@ def pose_from_survey(
     """
     if not -90.0 <= float(tilt_deg) <= 90.0:
         raise CameraError(f"tilt_deg must be within [-90, 90], got {tilt_deg}")
-    e, n, u = frame.to_enu_from_crs(
-        x, y, z, crs, geoid_undulation_m=geoid_undulation_m, z_unit_m=z_unit_m
-    )
-    p_enu = np.array([float(e), float(n), float(u)])
-    lat, lon, h = (float(v) for v in frame.to_geodetic(*p_enu))
+    p_enu, (lat, lon, h) = _position(frame, x, y, z, crs, geoid_undulation_m, z_unit_m)
     az_true, gamma = true_azimuth_deg(az_deg, north, crs, lat, lon)
     if north == "grid":
         # Measured through the position's own conversion (datum shift included), as for
@@ -186,6 +182,24 @@ def pose_from_survey(
         az_true = float(az_deg) + gamma
     r_local_cam = rotation_from_azimuth_tilt_roll(az_true, float(tilt_deg), float(roll_deg))
     return _in_site(frame, intrinsics, p_enu, (lat, lon, h), r_local_cam, az_true, gamma)
+
+
+def _position(
+    frame: LocalFrame,
+    x: float,
+    y: float,
+    z: float,
+    crs: Any,
+    geoid_undulation_m: float,
+    z_unit_m: float | None,
+) -> tuple[np.ndarray, tuple[float, float, float]]:
+    """The optical centre in the site frame, shape (3,), and its WGS84 lat, lon, h."""
+    e, n, u = frame.to_enu_from_crs(
+        x, y, z, crs, geoid_undulation_m=geoid_undulation_m, z_unit_m=z_unit_m
+    )
+    p_enu = np.array([float(e), float(n), float(u)])
+    lat, lon, h = (float(v) for v in frame.to_geodetic(*p_enu))
+    return p_enu, (lat, lon, h)
 
 
 def _in_site(
@@ -325,11 +339,7 @@ def pose_from_rotation(
     rot = uu @ vt
     if north is None:
         north = "grid" if horizontal_crs(crs).is_projected else "true"
-    e, n, u = frame.to_enu_from_crs(
-        x, y, z, crs, geoid_undulation_m=geoid_undulation_m, z_unit_m=z_unit_m
-    )
-    p_enu = np.array([float(e), float(n), float(u)])
-    lat, lon, h = (float(v) for v in frame.to_geodetic(*p_enu))
+    p_enu, (lat, lon, h) = _position(frame, x, y, z, crs, geoid_undulation_m, z_unit_m)
     # A grid direction at grid azimuth a has true azimuth a + gamma: turn it clockwise
     # by gamma about the vertical.
     true_azimuth_deg(0.0, north, crs, lat, lon)  # refuses a grid north of degrees
