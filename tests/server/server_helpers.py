@@ -59,21 +59,28 @@ def walk(
     return out
 
 
+def scenario_records(site, name: str, until_s: float, **extra: Any) -> list[dict[str, Any]]:
+    """Detection records of the sample-site scenario ``name`` before ``until_s`` (scenario
+    time), each with ``extra`` fields (e.g. ``score``)."""
+    from demtrack.samplesite.scenarios import make_scenario
+
+    return [
+        {"t": d.t_s, "sensor": d.sensor, "bbox": list(d.bbox), "class": d.cls, **extra}
+        for d in make_scenario(site, name).detections
+        if d.t_s < until_s
+    ]
+
+
 def vehicle_run_pipeline(site_dir: Path, tmp: Path, until_s: float):
     """A started kalman ``Pipeline`` on a fresh store, and the ``vehicle-run`` scenario's
     detection records before ``until_s`` (not yet ingested): ``(site, pipeline, records)``.
     """
     from demtrack.core.site.folder import load_site
-    from demtrack.samplesite.scenarios import make_scenario
     from demtrack.server.ingest.pipeline import Pipeline
     from demtrack.server.store.database import Store
 
     site = load_site(site_dir)
-    records = [
-        {"t": d.t_s, "sensor": d.sensor, "bbox": list(d.bbox), "class": d.cls, "score": 0.5}
-        for d in make_scenario(site, "vehicle-run").detections
-        if d.t_s < until_s
-    ]
+    records = scenario_records(site, "vehicle-run", until_s, score=0.5)
     p = Pipeline(site, Store(tmp / "f.sqlite3"), "kalman", lambda _m: None)
     p.start()
     return site, p, records

@@ -13,11 +13,10 @@ from xml.etree import ElementTree as ET
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
-from server_helpers import AUTH, make_app, post_in_time_batches
+from server_helpers import AUTH, make_app, post_in_time_batches, scenario_records
 
 from demtrack.core.io.track_io import GPX_NS, GX_NS, KML_NS
 from demtrack.core.site.folder import load_site
-from demtrack.samplesite.scenarios import make_scenario
 from demtrack.server.synopsis import synopsis, trajectory
 
 pytestmark = pytest.mark.timeout(600)
@@ -27,12 +26,7 @@ pytestmark = pytest.mark.timeout(600)
 def fed(sample_site_dir, tmp_path_factory):
     """A server that ingested the first 30 s of the vehicle run, 0.5 s per batch."""
     site = load_site(sample_site_dir)
-    sc = make_scenario(site, "vehicle-run")
-    recs = [
-        {"t": d.t_s, "sensor": d.sensor, "bbox": list(d.bbox), "class": d.cls}
-        for d in sc.detections
-        if d.t_s < 30.0
-    ]
+    recs = scenario_records(site, "vehicle-run", 30.0)
     with TestClient(make_app(sample_site_dir, tmp_path_factory.mktemp("syn"))) as c:
         post_in_time_batches(c, recs)
         yield c

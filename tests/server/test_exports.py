@@ -26,11 +26,10 @@ import pyogrio.raw
 import pytest
 import shapely
 from fastapi.testclient import TestClient
-from server_helpers import AUTH, make_app, post_in_time_batches
+from server_helpers import AUTH, make_app, post_in_time_batches, scenario_records
 
 from demtrack.core.io.track_io import GX_NS, KML_NS, HeightModel
 from demtrack.core.site.folder import load_site
-from demtrack.samplesite.scenarios import make_scenario
 from demtrack.server.site_info import geoid_grid_path
 from demtrack.server.track_export import export_bytes, site_heights, time_base
 
@@ -45,12 +44,7 @@ Q, G = f"{{{KML_NS}}}", f"{{{GX_NS}}}"
 def fed(sample_site_dir, tmp_path_factory):
     """A server that ingested the first 40 s of the vehicle run, 0.5 s per batch."""
     site = load_site(sample_site_dir)
-    sc = make_scenario(site, "vehicle-run")
-    recs = [
-        {"t": d.t_s, "sensor": d.sensor, "bbox": list(d.bbox), "class": d.cls}
-        for d in sc.detections
-        if d.t_s < 40.0
-    ]
+    recs = scenario_records(site, "vehicle-run", 40.0)
     with TestClient(make_app(sample_site_dir, tmp_path_factory.mktemp("exp"))) as c:
         post_in_time_batches(c, recs)
         yield c

@@ -16,11 +16,10 @@ from typing import Any
 import pytest
 from fastapi.testclient import TestClient
 from pydantic import TypeAdapter
-from server_helpers import AUTH, make_app, post_in_time_batches, walk
+from server_helpers import AUTH, make_app, post_in_time_batches, scenario_records, walk
 
 from demtrack.core.io.times import format_utc
 from demtrack.core.site.folder import load_site
-from demtrack.samplesite.scenarios import make_scenario
 from demtrack.server.json_response import json_response
 from demtrack.server.models import StoredDetectionOut, TracksOut
 from demtrack.server.store.codec import encode_json
@@ -40,11 +39,7 @@ def fed(sample_site_dir, tmp_path_factory):
     site = load_site(sample_site_dir)
     recs = walk(n=20, t0=T_MAX + 60.0)  # a minute later: the scenarios' tracks have ended
     for name in ("vehicle-run", "pedestrians"):
-        recs += [
-            {"t": d.t_s, "sensor": d.sensor, "bbox": list(d.bbox), "class": d.cls}
-            for d in make_scenario(site, name).detections
-            if d.t_s < T_MAX
-        ]
+        recs += scenario_records(site, name, T_MAX)
     recs.sort(key=lambda r: (r["t"], r["sensor"]))
     with TestClient(make_app(sample_site_dir, tmp_path_factory.mktemp("jr"))) as c:
         post_in_time_batches(c, recs)

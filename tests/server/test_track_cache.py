@@ -11,10 +11,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
-from server_helpers import AUTH, make_app, walk
+from server_helpers import AUTH, make_app, scenario_records, walk
 
 from demtrack.core.site.folder import load_site
-from demtrack.samplesite.scenarios import make_scenario
 from demtrack.server import store as db
 from demtrack.server.ingest.pipeline import Pipeline
 from demtrack.server.models import TracksOut
@@ -69,11 +68,7 @@ def _records(site, t_max):
     """The first ``t_max`` s of two scenarios, then one walk a minute later (tracks end)."""
     recs = walk(n=5, t0=t_max + 60.0)
     for name in ("vehicle-run", "pedestrians"):
-        recs += [
-            {"t": d.t_s, "sensor": d.sensor, "bbox": list(d.bbox), "class": d.cls}
-            for d in make_scenario(site, name).detections
-            if d.t_s < t_max
-        ]
+        recs += scenario_records(site, name, t_max)
     return sorted(recs, key=lambda r: (r["t"], r["sensor"]))
 
 
