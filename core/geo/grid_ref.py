@@ -105,9 +105,10 @@ def grid_refs(lat_deg: float, lon_deg: float) -> dict[str, Any]:
     that carry a grid reference beside every lat/lon.
     """
     try:
-        return {"mgrs": mgrs_of(lat_deg, lon_deg), "utm": utm_of(lat_deg, lon_deg).to_dict()}
+        u = utm_of(lat_deg, lon_deg)
     except GeodesyError:
         return {"mgrs": None, "utm": None}
+    return {"mgrs": _mgrs_of_utm(u, 5, True), "utm": u.to_dict()}
 
 
 def _check(lat_deg: float, lon_deg: float) -> tuple[float, float]:
@@ -202,7 +203,11 @@ def mgrs_of(lat_deg: float, lon_deg: float, precision: int = 5, *, spaced: bool 
     """
     if not isinstance(precision, int) or not 0 <= precision <= 5:
         raise GeodesyError(f"MGRS precision must be an integer from 0 to 5, got {precision!r}")
-    u = utm_of(lat_deg, lon_deg)
+    return _mgrs_of_utm(utm_of(lat_deg, lon_deg), precision, spaced)
+
+
+def _mgrs_of_utm(u: UtmRef, precision: int, spaced: bool) -> str:
+    """The MGRS lettering of a UTM coordinate (``precision`` checked by the caller)."""
     # Truncate at the metre first (a hair below an integer must not round up).
     e_1m, n_1m = math.floor(u.easting_m), math.floor(u.northing_m)
     col = _COLUMN_SETS[(u.zone - 1) % 3][e_1m // 100_000 - 1]

@@ -41,8 +41,8 @@ from datetime import datetime
 from pathlib import Path
 from typing import IO, Any
 
-from ..errors import TrackingError
-from ..geo.grid_ref import grid_refs
+from ..errors import GeodesyError, TrackingError
+from ..geo.grid_ref import mgrs_of
 from ..tracking.types import Track
 from .export_common import (
     UNIX_EPOCH,
@@ -251,6 +251,14 @@ def write_tracks_geojson(
 
 
 # ---------------------------------------------------------------------- CSV
+def _mgrs_or_empty(lat_deg: float, lon_deg: float) -> str:
+    """The point's 1 m MGRS reference; empty at the poles (UPS is not supported)."""
+    try:
+        return mgrs_of(lat_deg, lon_deg)
+    except GeodesyError:
+        return ""
+
+
 def write_tracks_csv(
     dest: Dest,
     tracks: Iterable[Track],
@@ -289,7 +297,7 @@ def write_tracks_csv(
                         repr(float(xt.h_m[i])),
                         repr(float(xt.abs_h_m[i])) if hm.orthometric else "",
                         hm.datum_name if hm.orthometric else "",
-                        grid_refs(float(xt.lat_deg[i]), float(xt.lon_deg[i]))["mgrs"] or "",
+                        _mgrs_or_empty(float(xt.lat_deg[i]), float(xt.lon_deg[i])),
                     ]
                 cov = (
                     ["", "", ""]
