@@ -170,6 +170,9 @@ def camera_at(head: PanTiltHead, pose: PoseSample, zoom: ZoomTable | None = None
     ------
     PoseError
         For an hfov outside ``zoom``'s table.
+    CameraError
+        For a zoom at which the lens model has no inverse over the image (a zoom much
+        wider than the calibrated one, on a strongly distorted lens).
     """
     intr = head.intrinsics
     if pose.hfov_deg is not None:
