@@ -276,6 +276,7 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     finally:
         if app.state.replay is not None:  # before the store closes: it ingests
             await run_in_threadpool(app.state.replay.stop)
+        await run_in_threadpool(pipeline.close)  # its pose-message timer writes too
         if scene is not None:
             await run_in_threadpool(scene.stop)
         if cot is not None:
