@@ -141,6 +141,7 @@ def _start_replay(
     settings: Settings,
     scenarios: ScenarioSource,
     after: Any = None,
+    send_poses: Any = None,
 ) -> Replay:
     """Start replaying ``settings.replay``; ``after`` (optional) is called before it plays.
 
@@ -173,6 +174,7 @@ def _start_replay(
     replay = Replay(
         frames,
         pipeline.ingest,
+        send_poses=send_poses,
         speed=settings.replay_speed,
         min_interval_s=settings.replay_batch_s,
     )
@@ -267,6 +269,7 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
             settings,
             app.state.scenarios,
             getattr(app.state, "replay_after", None),
+            app.state.console.poses.accept_records,
         )
         if settings.replay
         else None

@@ -1,11 +1,11 @@
 """WebSocket messages: pydantic models with a ``type`` discriminator.
 
 Server -> client stream messages (``fix``, ``track_update``, ``sensor_status``,
-``sensor_pose``, ``event``, ``marker``) carry ``seq``, a number that grows by one per stored message; a client that
-reconnects with ``/ws?since=N&store=<store_id>`` (or sends ``{"type": "resume", "since":
-N}``) is sent every stream message with ``seq > N`` first; a ``since`` of another store
-(``hello.store_id``) or beyond the newest message starts the client over
-(``hello.start_over``). Control messages (``hello``, ``pong``,
+``sensor_pose``, ``event``, ``marker``) carry ``seq``, a number that grows by one per
+stored message; a client that reconnects with ``/ws?since=N&store=<store_id>`` (or
+sends ``{"type": "resume", "since": N}``) is sent every stream message with ``seq > N``
+first; a ``since`` of another store (``hello.store_id``) or beyond the newest message
+starts the client over (``hello.start_over``). Control messages (``hello``, ``pong``,
 ``error``) are not stored and have ``seq: null``. A client that connects with
 ``/ws?batch=1`` may also be sent ``batch`` messages (``seq: null``): several stream
 messages in one frame, in ``seq`` order, each as it would have come alone.
