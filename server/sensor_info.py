@@ -8,10 +8,12 @@ intrinsics and the footprint are that pose's), the others at their stored pan an
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
-from typing import Any
 
+from demtrack.core.camera.pose_series import PoseSeries
 from demtrack.core.errors import NotFoundError
+from demtrack.core.io.pose_io import write_poses_csv, write_poses_jsonl
 from demtrack.core.io.times import format_utc
 from demtrack.core.site.folder import Sensor
 
@@ -90,13 +92,7 @@ def pose_export(
     if fmt == "json":
         poses = [{**b, "time_utc": format_utc(float(b["t_s"]), 3)} for b in bodies]
         return dumps_json({"sensor": sensor_id, "poses": poses}).encode(), "application/json"
-    samples = [sample_from_body(b) for b in bodies]
-    text = pose_file_text({sensor_id: samples}, fmt)
-    return text.encode("utf-8"), "text/csv" if fmt == "csv" else "application/x-ndjson"
-
-
-def pose_file_text(poses: dict[str, list[Any]], fmt: str) -> str:
-    """The pose file (``csv`` or ``jsonl``) of ``poses`` per sensor (pose_io's writer)."""
-    from demtrack.core.io import pose_io  # noqa: PLC0415 - until posecore lands
-
-    return pose_io.pose_file_text(poses, fmt)  # type: ignore[attr-defined]
+    series = PoseSeries.from_samples([sample_from_body(b) for b in bodies])
+    buf = io.StringIO()
+    (write_poses_csv if fmt == "csv" else write_poses_jsonl)(buf, {sensor_id: series})
+    return buf.getvalue().encode("utf-8"), "text/csv" if fmt == "csv" else "application/x-ndjson"

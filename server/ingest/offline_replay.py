@@ -168,7 +168,7 @@ def replay_detections(
             for records, by_sensor in batches:
                 for sensor, recs in sorted(by_sensor.items()):
                     head_u = float(site.sensor(sensor).head.position_enu[2])
-                    pipeline.ingest_poses(sensor, parse_pose_records(recs, head_u))
+                    pipeline.ingest_poses(sensor, parse_pose_records(recs, sensor, head_u))
                 if records:
                     pipeline.ingest(records)
             tracks = tuple(track_from_body(b) for b in store.tracks())

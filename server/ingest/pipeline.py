@@ -42,7 +42,7 @@ from .fix_codec import fix_bodies, fixes_from_bodies
 from .group_commit import Ack, GroupCommit, Request, commit_group
 from .pose_book import WINDOW_S, PoseBook
 from .pose_stream import PoseAnnouncer
-from .pose_values import inline_poses
+from .pose_values import ParsedPoses
 from .publish import Publisher, sensor_status_messages, store_and_publish
 from .reorder import ReorderBuffer
 from .replay_on_start import load_stored_fixes
@@ -158,6 +158,7 @@ class Pipeline:
         #: ``sensor_pose`` messages, rate-limited per sensor.
         self.announcer = PoseAnnouncer(pose_interval_s)
         self._flush_timer: threading.Timer | None = None
+        self._inline: dict[str, Any] | None = None
 
     # ------------------------------------------------------------- components
     @property
@@ -247,8 +248,11 @@ class Pipeline:
 
     # ------------------------------------------------------------------ ingest
     def _validate(self, records: Sequence[Any]) -> tuple[list[Detection], dict[str, Any]]:
-        """Check records with the detection-file rules (:mod:`.validate`)."""
-        return validate_records(records, self._last_t, self.sizes)
+        """Check records with the detection-file rules (:mod:`.validate`).
+
+        Their inline poses go to ``self._inline`` (per sensor) when it is a dict.
+        """
+        return validate_records(records, self._last_t, self.sizes, self._inline)
 
     def ingest(self, records: Sequence[Any], batch_key: str | None = None) -> dict[str, Any]:
         """Validate, store durably, then geolocate, track and publish one batch.
@@ -268,12 +272,13 @@ class Pipeline:
     ) -> dict[str, Any]:
         """Store one sensor's pose samples durably, as :meth:`ingest` stores detections.
 
-        ``samples``: :class:`~demtrack.core.camera.pose_series.PoseSample` values (or
-        ``(index, reason, message)`` for records a parser refused). They share the group
+        ``samples``: :class:`~demtrack.core.camera.pose_series.PoseSample` values, or the
+        :class:`~.pose_values.ParsedPoses` of posted records. They share the group
         commit with detection batches; once committed they join the sensor's series,
         detections waiting for them are geolocated and a ``sensor_pose`` message goes out.
         """
-        return self.commits.submit(samples, batch_key, self._ingest_group, sensor=sensor)
+        parsed = samples if isinstance(samples, ParsedPoses) else ParsedPoses.of(samples)
+        return self.commits.submit(parsed, batch_key, self._ingest_group, sensor=sensor)
 
     def _accept(self, req: Request) -> tuple[Any, ...]:
         """Validate one request after the batches before it and count its detections.
@@ -285,13 +290,15 @@ class Pipeline:
             kept, ack = book.check(req.sensor, req.records)
             req.samples = {req.sensor: kept} if kept else {}
             return [], {**ack, "kind": "poses", "sensor": req.sensor}, book.rows(req.sensor, kept)
+        inline: dict[str, Any] = {}
+        self._inline = inline  # _validate fills it (tests replace _validate itself)
         dets, ack = self._validate(req.records)
         for d in dets:
             self._last_t[d.sensor] = max(d.t_s, self._last_t.get(d.sensor, d.t_s))
             self._n_det[d.sensor] = self._n_det.get(d.sensor, 0) + 1
         req.samples, rows = {}, []
-        for sensor, samples in inline_poses(req.records, self.sizes).items():
-            kept, pose_ack = book.check(sensor, samples, quiet_duplicates=True)
+        for sensor, samples in sorted(inline.items()):
+            kept, pose_ack = book.check(sensor, ParsedPoses.of(samples), quiet_duplicates=True)
             if kept:
                 req.samples[sensor] = kept
                 rows += book.rows(sensor, kept)

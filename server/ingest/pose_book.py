@@ -7,9 +7,9 @@ fix_builder.build_fixes` with ``poses``), never with its stored pan and tilt. Ot
 sensors keep their fixed camera.
 
 Poses go forwards in time per sensor: a sample not newer than the sensor's newest stored
-one is skipped (``time_backwards`` / ``duplicate_time``), as is a sample that is not
-finite or not a pose (``not_finite`` / ``bad_pose``), and one whose optional parts (zoom,
-position, platform attitude) differ from the sensor's series (``fields_differ``). Each
+one is skipped (``time_backwards`` / ``duplicate_time``), as is one whose optional parts
+(zoom, position, platform attitude) differ from the sensor's series (``mixed_fields``),
+after the pose reader's own checks of each record (:mod:`.pose_values`). Each
 sensor's series keeps the last :data:`WINDOW_S` of samples in memory (trimmed when it
 holds twice that).
 
@@ -35,6 +35,7 @@ from demtrack.core.site.folder import Site
 from demtrack.core.tracking.types import Detection
 
 from ..store.poses import PoseRow
+from .pose_values import ParsedPoses
 from .validate import MAX_ISSUES
 
 __all__ = [
@@ -48,8 +49,9 @@ __all__ = [
 
 #: Seconds of poses each sensor's in-memory series keeps (behind its newest sample).
 WINDOW_S = 600.0
-#: Reasons a pose sample is skipped, in the order they are checked.
-POSE_REASONS = ("bad_pose", "not_finite", "fields_differ", "time_backwards", "duplicate_time")
+#: Reasons a sample the reader accepted is still skipped (against the stored poses), in
+#: the order they are checked; the reader's own are :data:`demtrack.core.io.pose_io.POSE_REASONS`.
+POSE_REASONS = ("nan", "time_backwards", "duplicate_time", "mixed_fields")
 
 
 def _shape(p: PoseSample) -> tuple[bool, bool, bool]:
@@ -146,17 +148,17 @@ class PoseBook:
         return sensor in self.last_t or sensor_pose_settings(self.site, sensor)[0]
 
     def check(
-        self, sensor: str, samples: Sequence[Any], *, quiet_duplicates: bool = False
+        self, sensor: str, parsed: ParsedPoses, *, quiet_duplicates: bool = False
     ) -> tuple[list[PoseSample], dict[str, Any]]:
-        """The samples of ``samples`` to store (advancing :attr:`last_t`) and the counts.
+        """The samples of ``parsed`` to store (advancing :attr:`last_t`) and the counts.
 
-        ``samples``: :class:`PoseSample` values, or ``(index, reason, message)`` tuples
-        for records already refused by the parser (counted as they are). With
-        ``quiet_duplicates`` a sample equal in time and value to the one before it is
-        dropped without being counted (the inline poses of one frame's detections).
+        ``parsed``: what the reader accepted and skipped; its samples then meet the
+        stored ones (time order, optional parts). With ``quiet_duplicates`` a sample at
+        the time of the one before it is dropped without being counted (the inline poses
+        of one frame's detections).
         """
-        counts = dict.fromkeys(POSE_REASONS, 0)
-        issues: list[dict[str, Any]] = []
+        counts = dict(parsed.counts)
+        issues = list(parsed.issues)
         kept: list[PoseSample] = []
         last = self.last_t.get(sensor, -math.inf)
         held = self.newest.get(sensor)
@@ -167,37 +169,35 @@ class PoseBook:
             if len(issues) < MAX_ISSUES:
                 issues.append({"index": i, "reason": reason, "message": message})
 
-        for i, p in enumerate(samples):
-            if isinstance(p, tuple):
-                skip(*p)
-                continue
+        for i, p in enumerate(parsed.samples):
             if not _finite(p):
-                skip(i, "not_finite", "pose holds NaN or infinity")
+                skip(i, "nan", f"a pose of {sensor} holds NaN or infinity")
                 continue
             if quiet_duplicates and p.t_s == last:
                 continue  # another detection of the same frame (or of the last one stored)
-            if shape is not None and _shape(p) != shape:
-                skip(i, "fields_differ", f"pose has other optional fields than {sensor}'s series")
-                continue
             if p.t_s < last:
-                skip(i, "time_backwards", f"pose at t={p.t_s} is older than {sensor}'s newest")
+                skip(i, "time_backwards", f"t={p.t_s} s is before {sensor}'s newest pose")
                 continue
             if p.t_s == last:
-                skip(i, "duplicate_time", f"{sensor} already has a pose at t={p.t_s}")
+                skip(i, "duplicate_time", f"{sensor} already has a pose at t={p.t_s} s")
+                continue
+            if shape is not None and _shape(p) != shape:
+                skip(i, "mixed_fields", f"optional fields differ from {sensor}'s series")
                 continue
             kept.append(p)
             last = p.t_s
             shape = _shape(p)
         if kept:
             self.last_t[sensor] = last
-        n_skipped = sum(counts.values())
+        issues.sort(key=lambda e: e["index"])
         ack = {
-            "n_records": len(samples),
+            "n_records": parsed.n_records,
             "accepted": len(kept),
-            "skipped": n_skipped,
+            "skipped": sum(counts.values()),
             "counts": {k: v for k, v in counts.items() if v},
             "issues": issues,
         }
+        self.n_skipped += ack["skipped"]
         return kept, ack
 
     @staticmethod

@@ -25,7 +25,7 @@ from demtrack.core.raycast.cast import RayCaster
 
 from ..footprints import footprint
 from .pipeline import Pipeline
-from .pose_values import parse_pose_records
+from .pose_values import ParsedPoses, parse_pose_records
 
 __all__ = ["FOOTPRINT_CACHE", "PoseIngest"]
 
@@ -54,12 +54,15 @@ class PoseIngest:
             pipeline.announcer.describe = self.footprint_at
 
     def accept(
-        self, sensor_id: str, samples: Sequence[Any], batch_key: str | None = None
+        self,
+        sensor_id: str,
+        samples: Sequence[PoseSample] | ParsedPoses,
+        batch_key: str | None = None,
     ) -> dict[str, Any]:
         """Store ``samples`` of ``sensor_id``; the acknowledgement (once committed).
 
-        ``samples``: :class:`PoseSample` values (or ``(index, reason, message)`` of
-        records a parser refused). Returns ``batch_id``, ``n_records``, ``accepted``,
+        ``samples``: :class:`PoseSample` values (or the :class:`~.pose_values.ParsedPoses`
+        of posted records). Returns ``batch_id``, ``n_records``, ``accepted``,
         ``skipped``, ``counts`` by reason, the first ``issues`` and ``duplicate``.
 
         Raises
@@ -68,7 +71,8 @@ class PoseIngest:
             For a sensor the site does not have.
         """
         self.site.sensor(sensor_id)
-        ack = dict(self.pipeline.ingest_poses(sensor_id, list(samples), batch_key))
+        parsed = samples if isinstance(samples, ParsedPoses) else ParsedPoses.of(samples)
+        ack = dict(self.pipeline.ingest_poses(sensor_id, parsed, batch_key))
         ack.pop("detection_ids", None)
         return ack
 
@@ -78,7 +82,7 @@ class PoseIngest:
         """:meth:`accept` for JSON records (:func:`~.pose_values.parse_pose_records`)."""
         sensor = self.site.sensor(sensor_id)
         head_u = float(sensor.head.position_enu[2])
-        return self.accept(sensor_id, parse_pose_records(records, head_u), batch_key)
+        return self.accept(sensor_id, parse_pose_records(records, sensor_id, head_u), batch_key)
 
     # ------------------------------------------------------------------ views
     def current(self, sensor_id: str) -> PoseSample | None:
