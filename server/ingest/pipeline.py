@@ -88,7 +88,7 @@ def pipeline_options(settings: Any) -> dict[str, Any]:
             else None
         ),
         "zones_path": settings.zones_path or settings.site / "zones.geojson",
-        "pose_interval_s": getattr(settings, "pose_message_interval_s", 0.1),
+        "pose_interval_s": settings.pose_message_interval_s,
     }
 
 
