@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -37,6 +37,7 @@ from demtrack.core.camera.head_motion import HeadCommand, HeadState, SlewLimits,
 from demtrack.core.camera.pantilt import PanTiltHead, wrap_deg
 from demtrack.core.camera.pinhole import Camera
 from demtrack.core.camera.pose_series import PoseSample, camera_at
+from demtrack.core.camera.zoom_lens import ZoomTable, intrinsics_for_hfov
 from demtrack.core.geolocation.fix_builder import default_foot_offsets
 from demtrack.core.raycast.cast import RayCaster
 from demtrack.core.terrain.dem import Dem
@@ -44,7 +45,7 @@ from demtrack.core.tracking.roadfollow import follow_road
 from demtrack.core.tracking.types import Detection
 from demtrack.core.visibility.viewshed import target_visible_fraction
 
-__all__ = ["FollowParams", "Follower", "HeadInfo"]
+__all__ = ["FollowParams", "Follower", "HeadInfo", "ZoomedHead"]
 
 
 @dataclass(frozen=True)
@@ -85,7 +86,30 @@ class FollowParams:
     lost_s: float = 8.0
 
 
-@dataclass(frozen=True)
+class ZoomedHead:
+    """A head's cameras at poses, with the lens of each zoom worked out once.
+
+    A head holds its zoom most of the time, and building the lens of a field of view
+    (its distortion inverse is checked) costs far more than posing it.
+    """
+
+    def __init__(self, head: PanTiltHead, zoom: ZoomTable | None = None) -> None:
+        self.head = head
+        self.zoom = zoom
+        self._heads: dict[float, PanTiltHead] = {}
+
+    def camera(self, pose: PoseSample) -> Camera:
+        """:func:`~demtrack.core.camera.pose_series.camera_at` of the head at ``pose``."""
+        if pose.hfov_deg is None:
+            return camera_at(self.head, pose)
+        head = self._heads.get(pose.hfov_deg)
+        if head is None:
+            intr = intrinsics_for_hfov(self.head.intrinsics, pose.hfov_deg, self.zoom)
+            head = self._heads[pose.hfov_deg] = replace(self.head, intrinsics=intr)
+        return camera_at(head, replace(pose, hfov_deg=None))
+
+
+@dataclass(frozen=True, eq=False)
 class HeadInfo:
     """What the controller knows of one head: the calibrated mount, its limits, its rest."""
 
@@ -94,10 +118,14 @@ class HeadInfo:
     home_pan_deg: float
     home_tilt_deg: float
     home_hfov_deg: float
+    zoom: ZoomTable | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_zoomed", ZoomedHead(self.head, self.zoom))
 
     def camera(self, reading: PoseSample) -> Camera:
         """The camera the controller believes in at an encoder reading."""
-        return camera_at(self.head, reading)
+        return self._zoomed.camera(reading)  # type: ignore[attr-defined]
 
 
 @dataclass

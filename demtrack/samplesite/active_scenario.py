@@ -33,14 +33,14 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from demtrack.core.camera.head_motion import HeadCommand, HeadState, SlewLimits, step
-from demtrack.core.camera.pantilt import PanTiltHead, wrap_deg
-from demtrack.core.camera.pose_series import PoseSample, PoseSeries, camera_at
+from demtrack.core.camera.pantilt import wrap_deg
+from demtrack.core.camera.pose_series import PoseSample, PoseSeries
 from demtrack.core.errors import SiteError
 from demtrack.core.raycast.cast import RayCaster
 from demtrack.core.site.folder import Sensor, Site
 from demtrack.core.tracking.types import Detection
 
-from .active_follow import Follower, FollowParams, HeadInfo
+from .active_follow import Follower, FollowParams, HeadInfo, ZoomedHead
 from .scene_render import (
     STAT_KEYS,
     Scenario,
@@ -193,7 +193,7 @@ def _advance(
 
 def _lines_of_sight(
     caster: RayCaster,
-    heads: Mapping[str, PanTiltHead],
+    centres: Mapping[str, np.ndarray],
     targets: Sequence[Target],
     world: World,
     frames: np.ndarray,
@@ -205,9 +205,9 @@ def _lines_of_sight(
         xy, heading = tg.motion.pose(frames[on])
         pts = target_points(xy, heading, tg.size_m, world)
         k = pts.shape[1]
-        for sid, head in heads.items():
+        for sid, centre in centres.items():
             mask = np.zeros((len(frames), k), dtype=bool)
-            mask[on] = line_of_sight(caster, head.position_enu, pts).reshape(-1, k)
+            mask[on] = line_of_sight(caster, centre, pts).reshape(-1, k)
             out[(sid, tg.target_id)] = mask
     return out
 
@@ -232,17 +232,20 @@ def make_active_scenario(
     frames = frame_times(targets, params.rate_hz)
     dt = 1.0 / params.rate_hz
     sids = sorted(site.sensors)
-    true_heads: dict[str, PanTiltHead] = {}
+    true_heads: dict[str, ZoomedHead] = {}
     infos: dict[str, HeadInfo] = {}
     states: dict[str, HeadState] = {}
     for sid in sids:
         s = site.sensors[sid]
-        true_heads[sid] = s.head.with_mount_yaw(yaws[sid]) if sid in yaws else s.head
+        true_heads[sid] = ZoomedHead(
+            s.head.with_mount_yaw(yaws[sid]) if sid in yaws else s.head, s.zoom
+        )
         intr = s.head.intrinsics
         hfov = math.degrees(2 * math.atan2(intr.width / 2, intr.fx))
-        infos[sid] = HeadInfo(s.head, _limits(s), s.pan_deg, s.tilt_deg, hfov)
+        infos[sid] = HeadInfo(s.head, _limits(s), s.pan_deg, s.tilt_deg, hfov, s.zoom)
         states[sid] = HeadState(float(frames[0]), s.pan_deg, s.tilt_deg, hfov)
-    clear = _lines_of_sight(caster, true_heads, targets, world, frames)
+    centres = {sid: h.head.position_enu for sid, h in true_heads.items()}
+    clear = _lines_of_sight(caster, centres, targets, world, frames)
     follower = Follower(infos, site.dem, list(site.roads.lines), active.follow, dt)
     seeds = np.random.SeedSequence(params.seed).spawn(2)
     rng = np.random.default_rng(params.seed)
@@ -254,7 +257,7 @@ def make_active_scenario(
     sub = dt / active.substeps
     for i, t in enumerate(frames):
         t = float(t)
-        cams = {sid: camera_at(true_heads[sid], _sample(t, states[sid])) for sid in sids}
+        cams = {sid: true_heads[sid].camera(_sample(t, states[sid])) for sid in sids}
         at_i = {key: mask[i] for key, mask in clear.items()}
         dets, _ = render_frame(t, cams, targets, world, caster, params, rng, stats, at_i)
         detections += dets
