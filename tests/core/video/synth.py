@@ -1,0 +1,156 @@
+"""Synthetic test videos written with PyAV, with their true boxes.
+
+A textured static background (smoothed noise, seeded), per-frame sensor noise, a slow
+illumination drift, and moving shapes: a person (a tall body with a head) and a car (a
+long low body with a cabin). Boxes are demtrack pixels ((0, 0) the centre of the top-left
+pixel), the tight box of the drawn shape.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from fractions import Fraction
+from pathlib import Path
+
+import av
+import cv2
+import numpy as np
+
+START = 1_795_000_000.0  # 2026-11-18T09:46:40Z
+
+
+@dataclass
+class Mover:
+    kind: str  # "human" or "vehicle"
+    xy0: tuple[float, float]  # top-left at frame 0 (px)
+    velocity: tuple[float, float]  # px per frame
+    size: tuple[int, int]  # (w, h) px
+    grey: int = 40
+    stops: tuple[tuple[int, int], ...] = ()  # (first, last) frames standing still
+    hidden: tuple[int, int] | None = None  # frames not drawn (occluded)
+
+    def position(self, k: int) -> tuple[float, float]:
+        moving = k
+        for a, b in self.stops:
+            moving -= max(0, min(k, b + 1) - a)
+        return self.xy0[0] + self.velocity[0] * moving, self.xy0[1] + self.velocity[1] * moving
+
+
+def background(w: int, h: int, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    noise = rng.normal(0, 1, (h // 4 + 1, w // 4 + 1)).astype(np.float32)
+    tex = cv2.resize(cv2.GaussianBlur(noise, (0, 0), 1.5), (w, h), interpolation=cv2.INTER_CUBIC)
+    tex = (tex - tex.min()) / (np.ptp(tex) + 1e-9)
+    return (110 + 80 * tex).astype(np.float32)
+
+
+def shape_mask(kind: str, w: int, h: int) -> np.ndarray:
+    m = np.zeros((h, w), np.uint8)
+    if kind == "human":
+        r = max(1, w // 3)
+        cv2.circle(m, (w // 2, r), r, 1, -1)  # head
+        cv2.rectangle(m, (w // 5, 2 * r), (w - 1 - w // 5, int(0.6 * h)), 1, -1)  # torso
+        cv2.rectangle(m, (w // 5, int(0.6 * h)), (w // 2 - 1, h - 1), 1, -1)  # legs
+        cv2.rectangle(m, (w // 2 + 1, int(0.6 * h)), (w - 1 - w // 5, h - 1), 1, -1)
+        cv2.rectangle(m, (0, 2 * r + 1), (w - 1, 2 * r + max(1, h // 12)), 1, -1)  # arms
+    else:
+        cv2.rectangle(m, (0, h // 3), (w - 1, h - 1), 1, -1)
+        cv2.rectangle(m, (w // 4, 0), (3 * w // 4, h // 3), 1, -1)
+    return m.astype(bool)
+
+
+@dataclass
+class Clip:
+    path: Path
+    boxes: list[list[tuple[str, tuple[float, float, float, float]]]] = field(default_factory=list)
+    fps: int = 25
+
+
+def write_video(
+    path: Path,
+    movers: list[Mover],
+    *,
+    size: tuple[int, int] = (320, 240),
+    n_frames: int = 60,
+    fps: int = 25,
+    seed: int = 0,
+    noise: float = 2.0,
+    drift: float = 0.15,
+    creation_time: str | None = "2026-11-18T09:46:40.000000Z",
+    codec: str = "libx264",
+    bg: np.ndarray | None = None,
+) -> Clip:
+    """Write the clip (H.264, lossless-ish crf 10) and return the true boxes per frame."""
+    w, h = size
+    base = background(w, h, seed) if bg is None else bg
+    rng = np.random.default_rng(seed + 1)
+    clip = Clip(path, fps=fps)
+    c = av.open(str(path), "w")
+    if creation_time:
+        c.metadata["creation_time"] = creation_time
+    s = c.add_stream(codec, rate=fps)
+    s.width, s.height, s.pix_fmt = w, h, "yuv420p"
+    s.options = {"crf": "10", "preset": "ultrafast", "bf": "0"}
+    for k in range(n_frames):
+        img = base + drift * k + rng.normal(0, noise, base.shape).astype(np.float32)
+        truth = []
+        for m in movers:
+            if m.hidden and m.hidden[0] <= k <= m.hidden[1]:
+                continue
+            x, y = m.position(k)
+            xi, yi = int(round(x)), int(round(y))
+            mw, mh = m.size
+            shp = shape_mask(m.kind, mw, mh)
+            x0, y0, x1, y1 = max(xi, 0), max(yi, 0), min(xi + mw, w), min(yi + mh, h)
+            if x1 <= x0 or y1 <= y0:
+                continue
+            sub = shp[y0 - yi : y1 - yi, x0 - xi : x1 - xi]
+            region = img[y0:y1, x0:x1]
+            region[sub] = m.grey + rng.normal(0, noise, int(sub.sum()))
+            rows, cols = np.nonzero(sub)
+            truth.append(
+                (
+                    m.kind,
+                    (
+                        x0 + cols.min() - 0.5,
+                        y0 + rows.min() - 0.5,
+                        x0 + cols.max() + 0.5,
+                        y0 + rows.max() + 0.5,
+                    ),
+                )
+            )
+        clip.boxes.append(truth)
+        rgb = np.repeat(np.clip(img, 0, 255).astype(np.uint8)[:, :, None], 3, axis=2)
+        frame = av.VideoFrame.from_ndarray(rgb, format="rgb24")
+        frame.pts = k
+        frame.time_base = Fraction(1, fps)
+        for p in s.encode(frame):
+            c.mux(p)
+    for p in s.encode():
+        c.mux(p)
+    c.close()
+    return clip
+
+
+def iou(a, b) -> float:
+    iw = min(a[2], b[2]) - max(a[0], b[0])
+    ih = min(a[3], b[3]) - max(a[1], b[1])
+    if iw <= 0 or ih <= 0:
+        return 0.0
+    inter = iw * ih
+    return inter / ((a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter)
+
+
+def match(truth_boxes, found_boxes, thr: float = 0.5) -> tuple[int, int, int]:
+    """Greedy one-to-one matching at IoU >= thr: (true positives, n_truth, n_found)."""
+    used = set()
+    tp = 0
+    for t in truth_boxes:
+        best, bj = 0.0, None
+        for j, f in enumerate(found_boxes):
+            if j not in used and (v := iou(t, f)) > best:
+                best, bj = v, j
+        if bj is not None and best >= thr:
+            used.add(bj)
+            tp += 1
+    return tp, len(truth_boxes), len(found_boxes)
