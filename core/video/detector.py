@@ -16,7 +16,8 @@ real-time video", and the hybrid of the VSAM final report (Collins et al. 2000, 
   within ``hold_s`` (a stopped object stays detected that long). A component not kept (a
   ghost, or an object still for longer) is learnt into the background at once; any pixel
   foreground and motionless for ``absorb_s`` is too. A plain background
-  model (``validate=False``) keeps every foreground component, ghosts included.
+  model (``validate=False``: the mean learns at every pixel, the usual running average)
+  keeps every foreground component, ghosts included.
 - Components below ``min_area_px`` and pixels under the ignore mask are dropped.
 
 The per-pixel work is OpenCV primitives on float32 (``cv2.absdiff``, ``cv2.compare``,
@@ -33,7 +34,7 @@ import cv2
 import numpy as np
 
 from ..errors import VideoError
-from .blobs import Blob, MotionDetector, blobs_from_mask, prepare_mask
+from .blobs import Blob, Component, MotionDetector, blobs_from_mask, prepare_mask
 from .reader import Frame
 
 __all__ = ["Blob", "MotionDetector", "VsamDetector", "iou"]
@@ -99,7 +100,7 @@ class VsamDetector:
         mask: np.ndarray | None = None,
         fps: float = 25.0,
         absorb_s: float = 10.0,
-        hold_s: float = 2.0,
+        hold_s: float = 5.0,
         validate: bool = True,
         downscale: int = 1,
     ) -> None:
@@ -143,6 +144,7 @@ class VsamDetector:
         self._last_motion: list[int] = []  # frame of each kept box's last motion
         self._stamps: list[int] = []
         self.hold_frames = max(1, int(round(hold_s * fps)))
+        self._check_every = max(1, int(round(fps)))
         self.n_frames = 0
 
     def _prepare(self, image: np.ndarray) -> np.ndarray:
@@ -163,7 +165,7 @@ class VsamDetector:
             self._prev = [img]
             return []
         mu, var = self._mu, self._var
-        thr = cv2.max(cv2.sqrt(var) * self.k, self.min_diff)
+        thr = cv2.max(cv2.multiply(cv2.sqrt(var), self.k), self.min_diff)
         diff_bg = cv2.absdiff(img, mu)
         fg = cv2.compare(diff_bg, thr, cv2.CMP_GT)
         if len(self._prev) == 2:
@@ -192,11 +194,11 @@ class VsamDetector:
         blobs = blobs_from_mask(clean, min_area_px=self.min_area_px, scale=self.scale, keep=keep)
         self._kept = [b.bbox for b in blobs]
         self._last_motion = state["stamps"]
-        rejected = state["rejected"]
-        if rejected.any():  # ghosts and long-still regions: learn them into the background now
-            sel = rejected[state["labels"]]
-            mu[sel] = img[sel]
-            self._still[sel] = 0
+        for c in state["rejected"]:  # ghosts and long-still regions: learn them now
+            x, y, w, h = c.rect
+            sel = c.roi.astype(bool)
+            mu[y : y + h, x : x + w][sel] = img[y : y + h, x : x + w][sel]
+            self._still[y : y + h, x : x + w][sel] = 0
         return blobs
 
     def _validator(self, moving: np.ndarray, state: dict):
@@ -209,19 +211,25 @@ class VsamDetector:
         s, n = self.scale, self.n_frames
         previous, last_motion = self._kept, self._last_motion
 
-        def keep(labels: np.ndarray, stats: np.ndarray, big: np.ndarray) -> np.ndarray:
-            n_moving = np.bincount(labels[moving > 0], minlength=len(stats))
-            out = np.zeros(len(stats), bool)
-            boxes = {}
-            for k in np.flatnonzero(big):
-                x, y, w, h = (int(a) for a in stats[k, :4])
-                boxes[k] = (x * s - 0.5, y * s - 0.5, (x + w) * s - 0.5, (y + h) * s - 0.5)
-            movers = [k for k in boxes if n_moving[k] > 0]
-            claimed = {i for i, b in enumerate(previous) for k in movers if iou(boxes[k], b) > 0.0}
-            stamps = []
-            for k, box in boxes.items():
-                if n_moving[k] > 0:
-                    out[k] = True
+        def keep(comps: list[Component]) -> list[bool]:
+            boxes, is_moving = [], []
+            for c in comps:
+                x, y, w, h = c.rect
+                boxes.append((x * s - 0.5, y * s - 0.5, (x + w) * s - 0.5, (y + h) * s - 0.5))
+                roi_moving = cv2.bitwise_and(
+                    moving[y : y + h, x : x + w], moving[y : y + h, x : x + w], mask=c.roi
+                )
+                is_moving.append(cv2.countNonZero(roi_moving) > 0)
+            claimed = {
+                i
+                for i, b in enumerate(previous)
+                for box, mv in zip(boxes, is_moving, strict=True)
+                if mv and iou(box, b) > 0.0
+            }
+            out, stamps, rejected = [], [], []
+            for c, box, mv in zip(comps, boxes, is_moving, strict=True):
+                if mv:
+                    out.append(True)
                     stamps.append(n)
                     continue
                 last = max(
@@ -232,12 +240,13 @@ class VsamDetector:
                     ),
                     default=-1,
                 )
-                if last >= 0 and n - last <= self.hold_frames:
-                    out[k] = True
+                ok = last >= 0 and n - last <= self.hold_frames
+                out.append(ok)
+                if ok:
                     stamps.append(last)
-            state["stamps"] = stamps
-            state["rejected"] = big & ~out
-            state["labels"] = labels
+                else:
+                    rejected.append(c)
+            state["stamps"], state["rejected"] = stamps, rejected
             return out
 
         return keep
@@ -245,23 +254,24 @@ class VsamDetector:
     def _update(
         self, img: np.ndarray, diff_bg: np.ndarray, fg: np.ndarray, moving: np.ndarray
     ) -> None:
-        """Learn the background where the pixel is background (everywhere when plain)."""
+        """Learn the background where the pixel is background (the mean everywhere if plain)."""
         mu, var = self._mu, self._var
         if mu is None or var is None:
             return
         sq = cv2.multiply(diff_bg, diff_bg)
-        if not self.validate:  # the plain running average of the comparison
-            cv2.accumulateWeighted(img, mu, self.alpha)
-            cv2.accumulateWeighted(sq, var, self.alpha)
-            return
-        # Frames each pixel has been foreground without moving; reset by motion or
-        # background. Beyond absorb_frames the pixel is learnt (absorbed) at once.
-        still = (fg > 0) & (moving == 0)
-        self._still = np.where(still, self._still + 1, 0).astype(np.uint16)
         background = cv2.bitwise_not(fg)
+        if not self.validate:  # the plain model of the comparison: the mean learns everywhere
+            cv2.accumulateWeighted(img, mu, self.alpha)
+            cv2.accumulateWeighted(sq, var, self.alpha, mask=background)
+            return
         cv2.accumulateWeighted(img, mu, self.alpha, mask=background)
         cv2.accumulateWeighted(sq, var, self.alpha, mask=background)
-        absorbed = self._still >= self.absorb_frames
-        if absorbed.any():
-            mu[absorbed] = img[absorbed]
-            self._still[absorbed] = 0
+        # Frames each pixel has been foreground without moving (reset by motion or by
+        # being background); checked once a second, a pixel still for absorb_s is learnt.
+        still = cv2.bitwise_and(fg, cv2.bitwise_not(moving))
+        self._still = cv2.bitwise_and(cv2.add(self._still, 1), 0xFFFF, mask=still)
+        if self.n_frames % self._check_every == 0:
+            absorbed = cv2.compare(self._still, self.absorb_frames, cv2.CMP_GE)
+            if cv2.countNonZero(absorbed):
+                cv2.copyTo(img, absorbed, mu)
+                self._still[absorbed > 0] = 0
