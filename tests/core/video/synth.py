@@ -165,6 +165,7 @@ class Body:
     velocity_enu: tuple[float, float]  # m/s east, north
     dims_m: tuple[float, float, float]  # width, length (along the velocity), height
     grey: int = 40
+    frames: tuple[int, int] = (0, 10**9)  # drawn in these frames (first, last) only
 
 
 def body_polygon(camera, p_enu, velocity, dims):
@@ -199,6 +200,7 @@ def site_clip(path, site, sensor_id, bodies, *, n_frames=60, fps=25, seed=0, noi
         starts.append(loc.best.p_enu)
     rng = np.random.default_rng(seed)
     h, w = base.shape
+    bank = rng.normal(0, noise, (7, h, w)).astype(np.float32)  # sensor noise, cycled
     clip = Clip(Path(path), fps=fps)
     c = av.open(str(path), "w")
     c.metadata["creation_time"] = "2026-11-18T09:46:40.000000Z"
@@ -206,21 +208,28 @@ def site_clip(path, site, sensor_id, bodies, *, n_frames=60, fps=25, seed=0, noi
     s.width, s.height, s.pix_fmt = w, h, "yuv420p"
     s.options = {"crf": "12", "preset": "ultrafast", "bf": "0"}
     for k in range(n_frames):
-        img = base + rng.normal(0, noise, base.shape).astype(np.float32)
+        img = base + bank[k % 7]
         truth = []
         for b, p0 in zip(bodies, starts, strict=True):
+            if not b.frames[0] <= k <= b.frames[1]:
+                continue
             p = p0 + np.array([b.velocity_enu[0], b.velocity_enu[1], 0.0]) * k / fps
             hull = body_polygon(cam, p, b.velocity_enu, b.dims_m)
-            mask = np.zeros((h, w), np.uint8)
-            cv2.fillConvexPoly(mask, np.round(hull).astype(np.int32), 1)
+            pts = np.round(hull).astype(np.int32)
+            x0, y0 = np.maximum(pts.reshape(-1, 2).min(axis=0), 0)
+            x1, y1 = np.minimum(pts.reshape(-1, 2).max(axis=0) + 1, (w, h))
+            if x1 <= x0 or y1 <= y0:
+                continue
+            mask = np.zeros((y1 - y0, x1 - x0), np.uint8)
+            cv2.fillConvexPoly(mask, pts - np.array([x0, y0]), 1)
             sel = mask.astype(bool)
             if not sel.any():
                 continue
-            img[sel] = b.grey + rng.normal(0, noise, int(sel.sum()))
+            region = img[y0:y1, x0:x1]
+            region[sel] = b.grey + rng.normal(0, noise, int(sel.sum()))
             rows, cols = np.nonzero(sel)
-            truth.append(
-                (b.kind, (cols.min() - 0.5, rows.min() - 0.5, cols.max() + 0.5, rows.max() + 0.5))
-            )
+            box = (x0 + cols.min() - 0.5, y0 + rows.min() - 0.5)
+            truth.append((b.kind, (*box, x0 + cols.max() + 0.5, y0 + rows.max() + 0.5)))
         clip.boxes.append(truth)
         rgb = np.repeat(np.clip(img, 0, 255).astype(np.uint8)[:, :, None], 3, axis=2)
         frame = av.VideoFrame.from_ndarray(rgb, format="rgb24")
