@@ -66,7 +66,7 @@ class _Progress:
         return f"{self.frames} frames, {rate}"
 
     def done(self) -> str:
-        if self.enabled:
+        if self.enabled and self._last:
             sys.stderr.write("\r" + " " * 100 + "\r")
         return self.line()
 

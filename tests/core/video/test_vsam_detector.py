@@ -65,7 +65,7 @@ def test_half_resolution_model_still_finds_them(traffic):
 
 @pytest.fixture(scope="module")
 def stop_and_go(tmp_path_factory):
-    """A car that stops for 2.4 s (a running average at 0.03 a frame learns 84 % of it), then goes."""
+    """A car that stops for 2.4 s (a running average at 0.03 a frame learns 84 %), then goes."""
     path = tmp_path_factory.mktemp("ghost") / "stop.mp4"
     car = Mover("vehicle", (10.0, 100.0), (3.0, 0.0), (60, 24), grey=210, stops=((20, 79),))
     return write_video(path, [car], n_frames=150, noise=2.0, drift=0.0)
