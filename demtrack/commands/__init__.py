@@ -18,6 +18,7 @@ from . import (
     site_import,
     track,
     viewshed,
+    watch,
 )
 
 __all__ = ["COMMANDS"]
@@ -38,5 +39,6 @@ COMMANDS = (
     handoff,
     gaps,
     serve,
+    watch,
     bench,
 )
