@@ -235,12 +235,8 @@ class PoseBatch:
 
     def camera_rotations(self, head: PanTiltHead) -> np.ndarray:
         """``R_world_cam`` of ``head`` at each pose, shape (n, 3, 3); NaN where not ok."""
-        r = rotations_from_azimuth_tilt_roll(
-            head.mount_yaw_deg + self.pan_deg, self.tilt_deg, self.roll_deg
-        )
-        if self.has_platform:
-            r = self.platform_R_world_body @ r
-        return r
+        platform = self.platform_R_world_body if self.has_platform else None
+        return _camera_rotations(head, self.pan_deg, self.tilt_deg, self.roll_deg, platform)
 
     def positions(self, head: PanTiltHead) -> np.ndarray:
         """Optical centres (site frame, m), shape (n, 3): the head's where none is given."""
@@ -543,10 +539,23 @@ class PoseSeries:
             arr[~ok] = np.nan
         pos[~ok] = np.nan
         rot[~ok] = np.nan
-        batch = PoseBatch(q, ok, pan, tilt, roll, hfov, pos, rot, None, self._quat is not None)
+        has_platform = self._quat is not None
+        r_world_cam = None
         if head is not None:
-            object.__setattr__(batch, "R_world_cam", batch.camera_rotations(head))
-        return batch
+            r_world_cam = _camera_rotations(head, pan, tilt, roll, rot if has_platform else None)
+        return PoseBatch(q, ok, pan, tilt, roll, hfov, pos, rot, r_world_cam, has_platform)
+
+
+def _camera_rotations(
+    head: PanTiltHead,
+    pan_deg: np.ndarray,
+    tilt_deg: np.ndarray,
+    roll_deg: np.ndarray,
+    platform: np.ndarray | None,
+) -> np.ndarray:
+    """``R_world_cam`` (n, 3, 3) of head joint angles, on a platform ``R_world_body`` if any."""
+    r = rotations_from_azimuth_tilt_roll(head.mount_yaw_deg + pan_deg, tilt_deg, roll_deg)
+    return r if platform is None else platform @ r
 
 
 def _lerp(v: np.ndarray, k0: np.ndarray, k1: np.ndarray, a: np.ndarray) -> np.ndarray:
