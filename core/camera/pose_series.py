@@ -326,16 +326,22 @@ class PoseSeries:
             if len(given) > 1:
                 raise PoseError(f"pose series: {name} is given by some samples but not all")
         first = samples[0] if samples else None
+
+        def column(name: str) -> list[Any] | None:
+            return (
+                None
+                if first is None or getattr(first, name) is None
+                else [getattr(s, name) for s in samples]
+            )
+
         return cls.from_arrays(
             [s.t_s for s in samples],
             [s.pan_deg for s in samples],
             [s.tilt_deg for s in samples],
-            [s.hfov_deg for s in samples] if first and first.hfov_deg is not None else None,
+            column("hfov_deg"),
             [s.roll_deg for s in samples],
-            [s.position_enu for s in samples] if first and first.position_enu is not None else None,
-            [s.platform_ypr_deg for s in samples]
-            if first and first.platform_ypr_deg is not None
-            else None,
+            column("position_enu"),
+            column("platform_ypr_deg"),
         )
 
     @classmethod
@@ -454,7 +460,7 @@ class PoseSeries:
                 f"pose series: a new sample at {new._t[0]!r} s is not after the last one "
                 f"({self._t[-1]!r} s)"
             )
-        joined = [
+        joined: list[Any] = [
             None if a is None else np.concatenate([a, b])
             for a, b in zip(self._parts(), new._parts(), strict=True)
         ]
@@ -468,7 +474,8 @@ class PoseSeries:
         k = max(int(np.searchsorted(self._t, float(t_s), side="right")) - 1, 0)
         if k == 0:
             return self
-        return PoseSeries(*(None if a is None else a[k:].copy() for a in self._parts()))
+        parts: list[Any] = [None if a is None else a[k:].copy() for a in self._parts()]
+        return PoseSeries(*parts)
 
     def at(
         self,

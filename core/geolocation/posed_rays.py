@@ -119,18 +119,19 @@ def posed_view_rays(
         If a pixel lies outside the image.
     """
     u, v = _pixels(view, view.u, view.v)
-    intr: Any = view.intrinsics
-    if view.fx_px is None:
-        xn, yn = intr.undistort(u, v)
+    base = view.intrinsics
+    intr: Any = base
+    if view.fx_px is None or view.fy_px is None:
+        xn, yn = base.undistort(u, v)
     else:
-        base = intr
         intr = _PixelLens(view.fx_px, view.fy_px, base.lens_coeffs)
+        k1, k2, p1, p2, k3, k4 = base.lens_coeffs
         xn, yn = undistort_normalized_nb(
             (u - base.cx) / view.fx_px,
             (v - base.cy) / view.fy_px,
-            *base.lens_coeffs,
+            k1, k2, p1, p2, k3, k4,
             r_max=base.fold_radius,
-        )
+        )  # fmt: skip
     ray = np.empty((len(xn), 3))
     ray[:, 0], ray[:, 1], ray[:, 2] = xn, yn, 1.0
     norm = np.linalg.norm(ray, axis=-1, keepdims=True)
