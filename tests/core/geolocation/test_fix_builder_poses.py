@@ -83,6 +83,13 @@ def test_a_sweeping_head_gives_the_ground_point_of_each_moment(tmp_path):
     )
     err = [np.linalg.norm(a.hits_enu[0] - b.hits_enu[0]) for a, b in zip(stale, fixes, strict=True)]
     assert min(err) > 5.0
+    # A sensor not marked active but given a series is geolocated at its poses too.
+    passive = replace(
+        site, sensors={**site.sensors, "ptz": replace(site.sensors["ptz"], active=False)}
+    )
+    again, _ = build_fixes(passive, dets, poses={"ptz": series}, foot_offset_m=NO_OFFSET)
+    for a, b in zip(again, fixes, strict=True):
+        np.testing.assert_array_equal(a.hits_enu, b.hits_enu)
 
 
 def test_detections_without_a_close_pose_are_no_pose(tmp_path):
