@@ -54,6 +54,8 @@ def test_slew_look_and_the_refusals(site_dir, tmp_path):
         assert body["mode"] == "idle" and body["kind"] == "sim"
         assert body["limits"]["pan_rate_deg_s"] == 90.0  # site.json's slew_limits
         assert body["status"]["time"].endswith("Z")
+        listed = c.get("/api/heads", headers=AUTH).json()
+        assert [h["sensor_id"] for h in listed] == ["cam1", "cam3"]  # cam2 is fixed
         r = c.put("/api/sensors/cam1/slew", headers=AUTH, json={"pan_deg": 20, "tilt_deg": -8})
         assert r.status_code == 200, r.text
         assert r.json()["mode"] == "slew"
@@ -130,6 +132,7 @@ def test_heads_off_and_a_site_without_active_heads(site_dir, sample_site_dir, tm
     with TestClient(make_app(site_dir, tmp_path, heads="off")) as c:
         r = c.put("/api/sensors/cam1/slew", headers=AUTH, json={"pan_deg": 1, "tilt_deg": 0})
         assert r.status_code == 409
+        assert c.get("/api/heads", headers=AUTH).json() == []
     (tmp_path / "b").mkdir()
     with TestClient(make_app(sample_site_dir, tmp_path / "b")) as c:
         assert c.get("/api/sensors/cam1/head", headers=AUTH).status_code == 409
