@@ -19,6 +19,7 @@ __all__ = [
     "GeoidError",
     "InputFileError",
     "NotFoundError",
+    "PoseError",
     "QueryError",
     "RaycastError",
     "SettingsError",
@@ -26,6 +27,8 @@ __all__ = [
     "TimeFormatError",
     "TrackingError",
     "UnknownSensorError",
+    "VideoError",
+    "VideoStallError",
 ]
 
 
@@ -77,6 +80,13 @@ class RaycastError(DemtrackError, ValueError):
     """Malformed ray-casting input (ray arrays, range, mode, hit limit)."""
 
 
+class PoseError(CameraError):
+    """An invalid sensor pose or pose series (a :class:`CameraError` as well).
+
+    A non-finite angle, times out of order, a zoom outside the lens's calibration table.
+    """
+
+
 class InputFileError(DemtrackError, ValueError):
     """A malformed or unreadable input file."""
 
@@ -95,3 +105,11 @@ class TrackingError(DemtrackError, ValueError):
 
 class SettingsError(DemtrackError, ValueError):
     """A server setting (a ``DEMTRACK_*`` variable or ``.env`` line) has a bad value."""
+
+
+class VideoError(DemtrackError, ValueError):
+    """A video that cannot be read: missing, corrupt, truncated, unreachable, no start time."""
+
+
+class VideoStallError(VideoError, TimeoutError):
+    """A live stream that delivered no packet within its timeout."""

@@ -143,6 +143,7 @@ def _start_replay(
     settings: Settings,
     scenarios: ScenarioSource,
     after: Any = None,
+    send_poses: Any = None,
 ) -> Replay:
     """Start replaying ``settings.replay``; ``after`` (optional) is called before it plays.
 
@@ -175,6 +176,7 @@ def _start_replay(
     replay = Replay(
         frames,
         pipeline.ingest,
+        send_poses=send_poses,
         speed=settings.replay_speed,
         min_interval_s=settings.replay_batch_s,
     )
@@ -270,6 +272,7 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
             settings,
             app.state.scenarios,
             getattr(app.state, "replay_after", None),
+            app.state.console.poses.accept_records,
         )
         if settings.replay
         else None
@@ -281,6 +284,7 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
             await run_in_threadpool(app.state.replay.stop)
         if app.state.heads is not None:  # it feeds poses into the store
             await run_in_threadpool(app.state.heads.stop)
+        await run_in_threadpool(pipeline.close)  # its pose-message timer writes too
         if scene is not None:
             await run_in_threadpool(scene.stop)
         if cot is not None:

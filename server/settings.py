@@ -94,6 +94,9 @@ class Settings(BaseSettings):
         Fixes wait this long (scenario time, behind the newest fix) in a reorder buffer so
         slightly out-of-order batches from several cameras are tracked in time order; a
         fix older than what was already tracked is stored with ``tracked: false``.
+    pose_message_interval_s : float
+        Least wall-clock time between two ``sensor_pose`` stream messages of one sensor
+        (s; the newest pose always goes out, at the end of the interval at worst).
     track_retain_s : float
         The live tracker forgets a track that ended more than this long ago (scenario
         time; it stays in SQLite and the API). At least the re-acquisition window (30 s)
@@ -163,6 +166,7 @@ class Settings(BaseSettings):
     viser_port: int = Field(default=8080, ge=0, le=65535)
     scene3d_rays: int = Field(default=40, ge=1, le=1000)
     reorder_lag_s: float = Field(default=0.5, ge=0, le=60, allow_inf_nan=False)
+    pose_message_interval_s: float = Field(default=0.1, ge=0, le=60, allow_inf_nan=False)
     track_retain_s: float = Field(default=600.0, ge=0, allow_inf_nan=False)
     events: bool = True
     events_every_s: float = Field(default=1.0, gt=0, le=3600, allow_inf_nan=False)
