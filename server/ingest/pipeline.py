@@ -459,6 +459,12 @@ class Pipeline:
         horizon = max(self._last_t.values(), default=-math.inf) - self.reorder_lag_s
         batch_sensors = sorted({d.sensor for _, d in pending})
         pending = self.pose_book.split(pending, horizon)
+        if not pending and not acks:  # poses alone, no detection due: nothing to track
+            moved = self.announcer.due(posed, self.pose_book.newest)
+            if moved:
+                store_and_publish(self.store, self.publish, [], [], moved, [])
+            self._arm_pose_flush()
+            return
         dets = [d for _, d in pending]
         # The bodies' geodetic fields are filled by the track points' conversion below:
         # one pyproj round trip per batch, not two.
