@@ -27,6 +27,8 @@ __all__ = [
     "TimeFormatError",
     "TrackingError",
     "UnknownSensorError",
+    "VideoError",
+    "VideoStallError",
 ]
 
 
@@ -103,3 +105,11 @@ class TrackingError(DemtrackError, ValueError):
 
 class SettingsError(DemtrackError, ValueError):
     """A server setting (a ``DEMTRACK_*`` variable or ``.env`` line) has a bad value."""
+
+
+class VideoError(DemtrackError, ValueError):
+    """A video that cannot be read: missing, corrupt, truncated, unreachable, no start time."""
+
+
+class VideoStallError(VideoError, TimeoutError):
+    """A live stream that delivered no packet within its timeout."""

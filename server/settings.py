@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
@@ -129,6 +129,12 @@ class Settings(BaseSettings):
     cot_queue_size : int
         Batches of stream messages the CoT sender buffers; beyond, they are dropped
         (ingest never waits for the network).
+    heads : {"sim", "off"}
+        Pan-tilt-zoom heads of the site's active sensors: ``sim`` (the default) drives a
+        simulated head for each (an ONVIF head where ``site.json`` configures one); ``off``
+        runs none.
+    heads_period_s : float
+        The head controller's tick (s): status polls, pose feed, follow commands.
     """
 
     model_config = SettingsConfigDict(
@@ -181,6 +187,8 @@ class Settings(BaseSettings):
     cot_stale_s: float = Field(default=60.0, gt=0, le=86_400, allow_inf_nan=False)
     cot_marker_stale_s: float = Field(default=86_400.0, gt=0, le=31_536_000, allow_inf_nan=False)
     cot_queue_size: int = Field(default=1000, gt=0, le=1_000_000)
+    heads: Literal["sim", "off"] = "sim"
+    heads_period_s: float = Field(default=0.1, gt=0, le=10, allow_inf_nan=False)
 
     @field_validator("replay_start_s", mode="before")
     @classmethod

@@ -1,0 +1,277 @@
+"""The VSAM motion detector: adaptive background subtraction validated by three-frame differencing.
+
+After Lipton, Fujiyoshi and Patil (1998), "Moving target classification and tracking from
+real-time video", and the hybrid of the VSAM final report (Collins et al. 2000, sec. 3.1):
+
+- **Three-frame differencing** marks a pixel as *moving* when it differs from both of
+  the two previous frames: ``|I_n - I_{n-1}| > T`` and ``|I_n - I_{n-2}| > T``. It
+  never fires on a region that is merely different from an old background (a *ghost*).
+- **An adaptive background model** per pixel, a running mean ``mu`` and variance
+  ``var`` with learning rate ``alpha``, updated only where the pixel is background
+  (``mu += alpha (I - mu)``, ``var += alpha ((I - mu)^2 - var)``), gives the *whole*
+  object: foreground where ``|I - mu| > T``, ``T = max(k sigma, min_diff)``. Slow
+  illumination drift is learnt at the background pixels.
+- **The hybrid**: a foreground component (after a 3x3 opening and a closing) is kept when
+  it holds moving pixels, or when it overlaps a box kept in the previous frame that moved
+  within ``hold_s`` (a stopped object stays detected that long). A component not kept (a
+  ghost, or an object still for longer) is learnt into the background at once; any pixel
+  foreground and motionless for ``absorb_s`` is too. A plain background
+  model (``validate=False``: the mean learns at every pixel, the usual running average)
+  keeps every foreground component, ghosts included.
+- Components below ``min_area_px`` and pixels under the ignore mask are dropped.
+
+The per-pixel work is OpenCV primitives on float32 (``cv2.absdiff``, ``cv2.compare``,
+``cv2.accumulateWeighted``), about 1.3 ms a megapixel each here. ``downscale`` (default 1:
+full resolution) runs the model on a smaller image when a frame is too big for real time;
+blobs come back in full-frame pixels either way.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from ..errors import VideoError
+from .blobs import Blob, Component, MotionDetector, blobs_from_mask, prepare_mask
+from .reader import Frame
+
+__all__ = ["Blob", "MotionDetector", "VsamDetector", "iou"]
+
+
+def iou(a: tuple[float, ...], b: tuple[float, ...]) -> float:
+    """Intersection over union of two ``(u_min, v_min, u_max, v_max)`` boxes."""
+    iw = min(a[2], b[2]) - max(a[0], b[0])
+    ih = min(a[3], b[3]) - max(a[1], b[1])
+    if iw <= 0 or ih <= 0:
+        return 0.0
+    inter = iw * ih
+    union = (a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter
+    return inter / union if union > 0 else 0.0
+
+
+def _gray(image: np.ndarray) -> np.ndarray:
+    if image.ndim == 2:
+        return image
+    return cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
+
+
+class VsamDetector:
+    """Lipton et al.'s moving-object detector (see the module docstring).
+
+    Parameters
+    ----------
+    size : tuple of int
+        Frame size ``(width, height)`` (px).
+    learning_rate : float
+        ``alpha`` of the background mean and variance (per frame, 0..1).
+    threshold_sigma : float
+        ``k``: a pixel is foreground (and moving) beyond ``k`` of its standard deviations.
+    min_diff : float
+        Floor of the threshold (grey levels), against a variance learnt too small.
+    min_area_px : float
+        Blobs smaller than this (full-frame pixels) are dropped.
+    mask : ndarray of bool, optional
+        ``(h, w)`` ignore mask (True = ignore), any size (resized).
+    fps : float
+        Frame rate, for ``absorb_s``.
+    absorb_s : float
+        A foreground region with no motion for this long is learnt into the background.
+    hold_s : float
+        A kept object that stops is still reported this long after its last motion;
+        then (and any foreground region never validated by motion, a ghost) it is learnt
+        into the background at once.
+    validate : bool
+        Keep only components validated by three-frame differencing (the hybrid); False
+        is a plain adaptive background subtraction (for comparison).
+    downscale : int
+        Run the model on an image this many times smaller (1 = full resolution).
+    """
+
+    def __init__(
+        self,
+        size: tuple[int, int],
+        *,
+        learning_rate: float = 0.05,
+        threshold_sigma: float = 4.0,
+        min_diff: float = 10.0,
+        min_area_px: float = 30.0,
+        mask: np.ndarray | None = None,
+        fps: float = 25.0,
+        absorb_s: float = 10.0,
+        hold_s: float = 5.0,
+        validate: bool = True,
+        downscale: int = 1,
+    ) -> None:
+        w, h = (int(s) for s in size)
+        if w < 8 or h < 8:
+            raise VideoError(f"frame size must be at least 8x8, got {size}")
+        if not 0 < learning_rate < 1:
+            raise VideoError(f"learning_rate must be within (0, 1), got {learning_rate}")
+        for name, value in (
+            ("threshold_sigma", threshold_sigma),
+            ("min_diff", min_diff),
+            ("fps", fps),
+            ("absorb_s", absorb_s),
+            ("hold_s", hold_s),
+        ):
+            if not (math.isfinite(value) and value > 0):
+                raise VideoError(f"{name} must be positive, got {value}")
+        if int(downscale) < 1:
+            raise VideoError(f"downscale must be 1 or more, got {downscale}")
+        self.size = (w, h)
+        self.scale = int(downscale)
+        self.work_size = (w // self.scale, h // self.scale)
+        self.alpha = float(learning_rate)
+        self.k = float(threshold_sigma)
+        self.min_diff = float(min_diff)
+        self.min_area_px = float(min_area_px)
+        self.validate = bool(validate)
+        self.absorb_frames = max(1, int(round(absorb_s * fps)))
+        full_mask = prepare_mask(mask, self.size)
+        self.mask = None if full_mask is None else prepare_mask(full_mask, self.work_size)
+        self._keep_mask = (
+            None if self.mask is None else np.where(self.mask, 0, 255).astype(np.uint8)
+        )
+        self._open = cv2.getStructuringElement(cv2.MORPH_RECT, (3, 3))
+        self._close = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (7, 7))
+        self._mu: np.ndarray | None = None
+        self._var: np.ndarray | None = None
+        self._prev: list[np.ndarray] = []  # I_{n-1}, I_{n-2}
+        self._still = np.zeros(self.work_size[::-1], np.uint16)  # frames fg without motion
+        self._kept: list[tuple[float, float, float, float]] = []
+        self._last_motion: list[int] = []  # frame of each kept box's last motion
+        self._stamps: list[int] = []
+        self.hold_frames = max(1, int(round(hold_s * fps)))
+        self._check_every = max(1, int(round(fps)))
+        self.n_frames = 0
+
+    def _prepare(self, image: np.ndarray) -> np.ndarray:
+        g = _gray(image)
+        if g.shape[::-1] != self.size:
+            raise VideoError(f"frame is {g.shape[1]}x{g.shape[0]}, detector expects {self.size}")
+        if self.scale > 1:
+            g = cv2.resize(g, self.work_size, interpolation=cv2.INTER_AREA)
+        return g.astype(np.float32)
+
+    def detect(self, frame: Frame) -> list[Blob]:
+        """The moving blobs of ``frame`` (none for the first two frames: warm-up)."""
+        img = self._prepare(frame.image)
+        self.n_frames += 1
+        if self._mu is None or self._var is None:
+            self._mu = img.copy()
+            self._var = np.full_like(img, (self.min_diff / self.k) ** 2)
+            self._prev = [img]
+            return []
+        mu, var = self._mu, self._var
+        thr = cv2.max(cv2.multiply(cv2.sqrt(var), self.k), self.min_diff)
+        diff_bg = cv2.absdiff(img, mu)
+        fg = cv2.compare(diff_bg, thr, cv2.CMP_GT)
+        if len(self._prev) == 2:
+            m1 = cv2.compare(cv2.absdiff(img, self._prev[0]), thr, cv2.CMP_GT)
+            m2 = cv2.compare(cv2.absdiff(img, self._prev[1]), thr, cv2.CMP_GT)
+            moving = cv2.bitwise_and(m1, m2)
+        else:
+            moving = np.zeros_like(fg)
+        if self._keep_mask is not None:
+            fg = cv2.bitwise_and(fg, self._keep_mask)
+            moving = cv2.bitwise_and(moving, self._keep_mask)
+        self._prev = [img, self._prev[0]]
+        self._update(img, diff_bg, fg, moving)
+        if self.n_frames < 3:
+            return []
+        clean = cv2.morphologyEx(fg, cv2.MORPH_OPEN, self._open)
+        clean = cv2.morphologyEx(clean, cv2.MORPH_CLOSE, self._close)
+        if self._keep_mask is not None:
+            clean = cv2.bitwise_and(clean, self._keep_mask)
+        if not self.validate:
+            blobs = blobs_from_mask(clean, min_area_px=self.min_area_px, scale=self.scale)
+            self._kept = [b.bbox for b in blobs]
+            return blobs
+        state: dict = {}
+        keep = self._validator(moving, state)
+        blobs = blobs_from_mask(clean, min_area_px=self.min_area_px, scale=self.scale, keep=keep)
+        self._kept = [b.bbox for b in blobs]
+        self._last_motion = state["stamps"]
+        for c in state["rejected"]:  # ghosts and long-still regions: learn them now
+            x, y, w, h = c.rect
+            sel = c.roi.astype(bool)
+            mu[y : y + h, x : x + w][sel] = img[y : y + h, x : x + w][sel]
+            self._still[y : y + h, x : x + w][sel] = 0
+        return blobs
+
+    def _validator(self, moving: np.ndarray, state: dict):
+        """``keep`` for :func:`blobs_from_mask` (the hybrid rule of the module docstring).
+
+        A component is kept if it holds moving pixels; or, still, if it overlaps a box
+        kept in the previous frame that moved within ``hold_s`` and that no moving
+        component overlaps now (a component split off a moving one is a ghost).
+        """
+        s, n = self.scale, self.n_frames
+        previous, last_motion = self._kept, self._last_motion
+
+        def keep(comps: list[Component]) -> list[bool]:
+            boxes, is_moving = [], []
+            for c in comps:
+                x, y, w, h = c.rect
+                boxes.append((x * s - 0.5, y * s - 0.5, (x + w) * s - 0.5, (y + h) * s - 0.5))
+                roi_moving = cv2.bitwise_and(
+                    moving[y : y + h, x : x + w], moving[y : y + h, x : x + w], mask=c.roi
+                )
+                is_moving.append(cv2.countNonZero(roi_moving) > 0)
+            claimed = {
+                i
+                for i, b in enumerate(previous)
+                for box, mv in zip(boxes, is_moving, strict=True)
+                if mv and iou(box, b) > 0.0
+            }
+            out, stamps, rejected = [], [], []
+            for c, box, mv in zip(comps, boxes, is_moving, strict=True):
+                if mv:
+                    out.append(True)
+                    stamps.append(n)
+                    continue
+                last = max(
+                    (
+                        last_motion[i]
+                        for i, b in enumerate(previous)
+                        if i not in claimed and iou(box, b) >= 0.3
+                    ),
+                    default=-1,
+                )
+                ok = last >= 0 and n - last <= self.hold_frames
+                out.append(ok)
+                if ok:
+                    stamps.append(last)
+                else:
+                    rejected.append(c)
+            state["stamps"], state["rejected"] = stamps, rejected
+            return out
+
+        return keep
+
+    def _update(
+        self, img: np.ndarray, diff_bg: np.ndarray, fg: np.ndarray, moving: np.ndarray
+    ) -> None:
+        """Learn the background where the pixel is background (the mean everywhere if plain)."""
+        mu, var = self._mu, self._var
+        if mu is None or var is None:
+            return
+        sq = cv2.multiply(diff_bg, diff_bg)
+        background = cv2.bitwise_not(fg)
+        if not self.validate:  # the plain model of the comparison: the mean learns everywhere
+            cv2.accumulateWeighted(img, mu, self.alpha)
+            cv2.accumulateWeighted(sq, var, self.alpha, mask=background)
+            return
+        cv2.accumulateWeighted(img, mu, self.alpha, mask=background)
+        cv2.accumulateWeighted(sq, var, self.alpha, mask=background)
+        # Frames each pixel has been foreground without moving (reset by motion or by
+        # being background); checked once a second, a pixel still for absorb_s is learnt.
+        still = cv2.bitwise_and(fg, cv2.bitwise_not(moving))
+        self._still = cv2.bitwise_and(cv2.add(self._still, 1), 0xFFFF, mask=still)
+        if self.n_frames % self._check_every == 0:
+            absorbed = cv2.compare(self._still, self.absorb_frames, cv2.CMP_GE)
+            if cv2.countNonZero(absorbed):
+                cv2.copyTo(img, absorbed, mu)
+                self._still[absorbed > 0] = 0
