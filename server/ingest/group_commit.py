@@ -11,7 +11,7 @@ fails another's).
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -30,7 +30,8 @@ Ack = tuple[dict[str, Any], float | None]
 class Request:
     """One ingest call waiting for its group's commit."""
 
-    records: Sequence[Any]
+    #: Detection records, or (a pose batch) the :class:`~.pose_values.ParsedPoses`.
+    records: Any
     batch_key: str | None
     ack: dict[str, Any] | None = None
     error: BaseException | None = None
@@ -58,7 +59,7 @@ class GroupCommit:
 
     def submit(
         self,
-        records: Sequence[Any],
+        records: Any,
         batch_key: str | None,
         run: Callable[[list[Request]], None],
         sensor: str | None = None,

@@ -27,7 +27,7 @@ from demtrack.core.activity.convoy import ConvoyParams
 from demtrack.core.activity.kinds import EventKind
 from demtrack.core.activity.loitering import LoiterParams
 from demtrack.core.activity.rendezvous import RendezvousParams
-from demtrack.core.geolocation.fix_builder import build_fixes, sensor_sizes
+from demtrack.core.geolocation.fix_builder import sensor_sizes
 from demtrack.core.site.folder import Site
 from demtrack.core.site.zone_io import read_zones_geojson
 from demtrack.core.tracking import build_tracker
@@ -40,7 +40,7 @@ from ..store.integrity import StoreUnavailableError
 from .events import event_message, ingest_message
 from .fix_codec import fix_bodies, fixes_from_bodies
 from .group_commit import Ack, GroupCommit, Request, commit_group
-from .pose_book import WINDOW_S, PoseBook
+from .pose_book import WINDOW_S, PoseBook, geolocate_posed
 from .pose_stream import PoseAnnouncer
 from .pose_values import ParsedPoses
 from .publish import Publisher, sensor_status_messages, store_and_publish
@@ -159,6 +159,7 @@ class Pipeline:
         self.announcer = PoseAnnouncer(pose_interval_s)
         self._flush_timer: threading.Timer | None = None
         self._inline: dict[str, Any] | None = None
+        self._closed = False
 
     # ------------------------------------------------------------- components
     @property
@@ -268,7 +269,7 @@ class Pipeline:
         return self.commits.submit(records, batch_key, self._ingest_group)
 
     def ingest_poses(
-        self, sensor: str, samples: Sequence[Any], batch_key: str | None = None
+        self, sensor: str, samples: Sequence[Any] | ParsedPoses, batch_key: str | None = None
     ) -> dict[str, Any]:
         """Store one sensor's pose samples durably, as :meth:`ingest` stores detections.
 
@@ -386,7 +387,11 @@ class Pipeline:
     def _arm_pose_flush(self) -> None:
         """Start a timer for the ``sensor_pose`` messages the rate limit held back."""
         delay = self.announcer.next_flush_s()
-        if delay is None or (self._flush_timer is not None and self._flush_timer.is_alive()):
+        if (
+            delay is None
+            or self._closed
+            or (self._flush_timer is not None and self._flush_timer.is_alive())
+        ):
             return
         self._flush_timer = threading.Timer(delay + 1e-3, self.flush_poses)
         self._flush_timer.daemon = True
@@ -397,6 +402,8 @@ class Pipeline:
         try:
             with self._lock:
                 self._flush_timer = None
+                if self._closed:
+                    return
                 events = self.announcer.flush(self.pose_book.newest)
                 if events:
                     store_and_publish(self.store, self.publish, [], [], events, [])
@@ -407,6 +414,7 @@ class Pipeline:
     def close(self) -> None:
         """Stop the pose flush timer (before the store closes)."""
         with self._lock:
+            self._closed = True
             if self._flush_timer is not None:
                 self._flush_timer.cancel()
                 self._flush_timer = None
@@ -433,35 +441,6 @@ class Pipeline:
         )
         return bodies, unfilled
 
-    def _geolocate(
-        self, pending: list[tuple[int, Detection]]
-    ) -> tuple[list[dict[str, Any] | None], list[Geodetic], np.ndarray]:
-        """Fix bodies of ``pending`` (None: no fix) and which of them have no pose.
-
-        Telemetry sensors' detections are geolocated with their pose series
-        (:mod:`.pose_book`); those without a pose close enough are not geolocated.
-        """
-        dets = [d for _, d in pending]
-        no_pose = self.pose_book.no_pose(dets)
-        if not no_pose.any():
-            fixes, _ = build_fixes(self.site, dets, **self._pose_kwargs(dets))
-            bodies, unfilled = self._fix_bodies(pending, fixes)
-            return bodies, unfilled, no_pose
-        keep = np.flatnonzero(~no_pose).tolist()
-        sub = [pending[i] for i in keep]
-        sub_dets = [d for _, d in sub]
-        fixes, _ = build_fixes(self.site, sub_dets, **self._pose_kwargs(sub_dets))
-        sub_bodies, unfilled = self._fix_bodies(sub, fixes)
-        bodies: list[dict[str, Any] | None] = [None] * len(pending)
-        for i, b in zip(keep, sub_bodies, strict=True):
-            bodies[i] = b
-        return bodies, unfilled, no_pose
-
-    def _pose_kwargs(self, dets: Sequence[Detection]) -> dict[str, Any]:
-        """``build_fixes``'s ``poses`` argument for ``dets`` (none: the fixed path as before)."""
-        poses = self.pose_book.for_fixes(dets)
-        return {"poses": poses} if poses else {}
-
     def _process(
         self,
         pending: list[tuple[int, Detection]],
@@ -480,10 +459,18 @@ class Pipeline:
         horizon = max(self._last_t.values(), default=-math.inf) - self.reorder_lag_s
         batch_sensors = sorted({d.sensor for _, d in pending})
         pending = self.pose_book.split(pending, horizon)
+        if not pending and not acks:  # poses alone, no detection due: nothing to track
+            moved = self.announcer.due(posed, self.pose_book.newest)
+            if moved:
+                store_and_publish(self.store, self.publish, [], [], moved, [])
+            self._arm_pose_flush()
+            return
         dets = [d for _, d in pending]
         # The bodies' geodetic fields are filled by the track points' conversion below:
         # one pyproj round trip per batch, not two.
-        bodies, unfilled, no_pose = self._geolocate(pending)
+        bodies, unfilled, no_pose = geolocate_posed(
+            self.site, self.pose_book, pending, self._fix_bodies
+        )
         fixed = {det_id for (det_id, _), body in zip(pending, bodies, strict=True) if body}
         rows: list[FixRow] = []
         events: list[tuple[str, StreamPayload]] = list(

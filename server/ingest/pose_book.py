@@ -24,15 +24,16 @@ stored poses before the unprocessed detections decides exactly as the live run d
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
 from demtrack.core.camera.pose_series import PoseSample, PoseSeries
 from demtrack.core.errors import DemtrackError
+from demtrack.core.geolocation.fix_builder import build_fixes
 from demtrack.core.site.folder import Site
-from demtrack.core.tracking.types import Detection
+from demtrack.core.tracking.types import Detection, Fix
 
 from ..store.poses import PoseRow
 from .pose_values import ParsedPoses
@@ -40,6 +41,8 @@ from .validate import MAX_ISSUES
 
 __all__ = [
     "POSE_REASONS",
+    "FixBodies",
+    "geolocate_posed",
     "WINDOW_S",
     "PoseBook",
     "pose_body",
@@ -190,14 +193,15 @@ class PoseBook:
         if kept:
             self.last_t[sensor] = last
         issues.sort(key=lambda e: e["index"])
+        n_skipped = sum(counts.values())
         ack = {
             "n_records": parsed.n_records,
             "accepted": len(kept),
-            "skipped": sum(counts.values()),
+            "skipped": n_skipped,
             "counts": {k: v for k, v in counts.items() if v},
             "issues": issues,
         }
-        self.n_skipped += ack["skipped"]
+        self.n_skipped += n_skipped
         return kept, ack
 
     @staticmethod
@@ -284,3 +288,35 @@ class PoseBook:
                 ok = np.zeros(len(idx), dtype=bool)
             out[idx] = ~ok
         return out
+
+
+#: ``fix_bodies(pending, fixes)`` -> the stored bodies (None: no fix) and their geodetic
+#: work (the pipeline's ``_fix_bodies``).
+FixBodies = Callable[
+    [list[tuple[int, Detection]], list[Fix]], tuple[list[dict[str, Any] | None], list[Any]]
+]
+
+
+def geolocate_posed(
+    site: Site, book: PoseBook, pending: list[tuple[int, Detection]], fix_bodies: FixBodies
+) -> tuple[list[dict[str, Any] | None], list[Any], np.ndarray]:
+    """Fix bodies of ``pending`` (None: no fix) and the mask of those with no pose.
+
+    Telemetry sensors' detections are geolocated with their series
+    (``build_fixes(poses=...)``); those with no pose close enough are not geolocated at
+    all. Without telemetry among them this is the fixed path exactly as before.
+    """
+    dets = [d for _, d in pending]
+    no_pose = book.no_pose(dets)
+    keep = np.flatnonzero(~no_pose).tolist()
+    sub = pending if len(keep) == len(pending) else [pending[i] for i in keep]
+    sub_dets = [d for _, d in sub]
+    poses = book.for_fixes(sub_dets)
+    fixes, _ = build_fixes(site, sub_dets, **({"poses": poses} if poses else {}))
+    bodies, unfilled = fix_bodies(sub, fixes)
+    if sub is pending:
+        return bodies, unfilled, no_pose
+    out: list[dict[str, Any] | None] = [None] * len(pending)
+    for i, b in zip(keep, bodies, strict=True):
+        out[i] = b
+    return out, unfilled, no_pose
