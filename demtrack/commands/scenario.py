@@ -109,7 +109,7 @@ def _run(args: argparse.Namespace) -> int:
         n = sum(len(p) for p in sc.poses.values())
         print(
             f"pose telemetry: {n} samples of {len(sc.poses)} heads -> {poses_path}"
-            f" (stamps {ACTIVE_LATENCY_S:g} s late: set the sensors' pose_latency_s)"
+            f" (stamps {ACTIVE_LATENCY_S:g} s late, the sample sensors' pose_latency_s)"
         )
     print(f"times: UTC from {format_utc(t0_s)} (t = UNIX seconds)")
     return 0
