@@ -13,6 +13,7 @@ from demtrack.core.errors import InputFileError
 
 from .choices import ACTIVE_LATENCY_S, ACTIVE_SCENARIO_NAMES, SCENARIO_NAMES, TRACKING_METHODS
 from .common import add_site_argument
+from .evaluate_active import STUB_S, metrics_doc, n_stubs
 from .scenario import add_scenario_parameters, params_from_args
 
 if TYPE_CHECKING:
@@ -50,17 +51,9 @@ def tracking_config(vehicle_coast_s: float = 4.0, human_coast_s: float = 4.0) ->
     )
 
 
-#: A track spanning less than this from first to last point is a stub (s).
-STUB_S = 5.0
-
 #: The live server's batches in scenario seconds: the replay's 0.1 s wall-time batch
 #: interval (``DEMTRACK_REPLAY_BATCH_S``) at 1x and at 10x.
 SERVER_BATCHES: tuple[tuple[str, float], ...] = (("1x", 0.1), ("10x", 1.0))
-
-
-def n_stubs(tracks: Sequence[Track], min_s: float = STUB_S) -> int:
-    """How many ``tracks`` span less than ``min_s`` seconds."""
-    return sum(1 for t in tracks if t.points and t.points[-1].t_s - t.points[0].t_s < min_s)
 
 
 def format_table(rows: Sequence[tuple[str, TrackingMetrics, int, int | None]]) -> str:
@@ -153,8 +146,6 @@ def _run(args: argparse.Namespace) -> int:
     from demtrack.core.site.folder import load_site
     from demtrack.core.tracking import evaluate, run_tracker
     from demtrack.samplesite.scenarios import make_scenario
-
-    from .evaluate_active import metrics_doc
 
     params = params_from_args(args)
     site = load_site(args.site)

@@ -1,4 +1,7 @@
-"""``demtrack evaluate`` on an active scenario: PTZ heads with telemetry, and two baselines.
+"""``demtrack evaluate`` on an active scenario: PTZ heads with telemetry, and baselines.
+
+Also the per-method scoring helpers every scenario's ``evaluate`` shares (:func:`n_stubs`,
+:func:`metrics_doc`).
 
 The heads' detections are geolocated at the pose of each detection's moment (the
 scenario's telemetry, with the site's sensors made active and ``pose_latency_s`` set),
@@ -26,9 +29,25 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from demtrack.core.site.folder import Site
-    from demtrack.core.tracking import Fix, TrackerConfig, TrackingMetrics, TruthPath
+    from demtrack.core.tracking import Fix, Track, TrackerConfig, TrackingMetrics, TruthPath
 
-__all__ = ["best_method", "fix_errors", "format_comparisons", "metrics_doc", "run_active"]
+__all__ = [
+    "STUB_S",
+    "best_method",
+    "fix_errors",
+    "format_comparisons",
+    "metrics_doc",
+    "n_stubs",
+    "run_active",
+]
+
+#: A track spanning less than this from first to last point is a stub (s).
+STUB_S = 5.0
+
+
+def n_stubs(tracks: Sequence[Track], min_s: float = STUB_S) -> int:
+    """How many ``tracks`` span less than ``min_s`` seconds."""
+    return sum(1 for t in tracks if t.points and t.points[-1].t_s - t.points[0].t_s < min_s)
 
 
 def metrics_doc(m: TrackingMetrics, stubs: int | None = None) -> dict[str, Any]:
@@ -96,8 +115,6 @@ def fix_errors(fixes: Sequence[Fix], truths: Sequence[TruthPath]) -> dict[str, A
 
 def _score(fixes, site: Site, method: str, truths, config: TrackerConfig):
     from demtrack.core.tracking import evaluate, run_tracker
-
-    from .evaluate import n_stubs
 
     roads = site.roads if method != "raw-first" else None
     tracks = run_tracker(fixes, method, roads=roads, config=config)
