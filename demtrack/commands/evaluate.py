@@ -199,8 +199,8 @@ def _run_active(args: argparse.Namespace, methods: Sequence[str]) -> int:
     """An active scenario: the heads' run and its baselines (:mod:`.evaluate_active`)."""
     from .evaluate_active import format_comparisons, run_active
 
-    doc = run_active(args, methods, tracking_config())
-    rows = [(name, m, stubs, None) for name, m, stubs in doc.pop("_rows")]
+    doc = run_active(args, methods, tracking_config(), SERVER_BATCHES)
+    rows = doc.pop("_rows")
     if args.json:
         print(json.dumps(doc, indent=2))
         return 0
@@ -216,8 +216,6 @@ def _run_active(args: argparse.Namespace, methods: Sequence[str]) -> int:
     print(format_table(rows))
     print(f"\ncompared, with the best method ({doc['best_method']}):")
     print(format_comparisons(doc))
-    if args.server_method != "none":
-        print("(the server's rows are left out: its offline replay takes no pose telemetry)")
     return 0
 
 

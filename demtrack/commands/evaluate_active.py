@@ -133,12 +133,36 @@ def _variant(label, fixes, report, n_dets, site, method, truths, config, share) 
     return doc
 
 
+def _server_rows(args: argparse.Namespace, site: Site, sc: Any, batches: Sequence) -> list:
+    """The live server's tracks of the heads' detections and telemetry, per batching."""
+    if args.server_method == "none":
+        return []
+    from demtrack.core.tracking import evaluate
+    from demtrack.server.ingest.offline_replay import early_ended, replay_detections
+
+    out = []
+    for speed, batch_s in batches:
+        live = replay_detections(
+            site, sc.detections, method=args.server_method, batch_s=batch_s, poses=sc.poses
+        )
+        m = evaluate(live.tracks, sc.truths)
+        name = f"server {speed} ({args.server_method})"
+        out.append((name, m, n_stubs(live.tracks), len(early_ended(live))))
+    return out
+
+
 def run_active(
-    args: argparse.Namespace, methods: Sequence[str], config: TrackerConfig
+    args: argparse.Namespace,
+    methods: Sequence[str],
+    config: TrackerConfig,
+    server_batches: Sequence[tuple[str, float]] = (),
 ) -> dict[str, Any]:
     """Generate, geolocate, track and score an active scenario and its baselines.
 
-    Returns the ``--json`` document; prints nothing.
+    ``server_batches`` (``(label, batch_s)``) are the live server's replays to score when
+    ``args.server_method`` is not ``none``: the detections and the telemetry through its
+    ingest pipeline. Returns the ``--json`` document (its ``_rows`` for the table); prints
+    nothing.
     """
     from dataclasses import replace
 
@@ -159,13 +183,16 @@ def run_active(
     posed = active_site(site, latency)
     fixes, report = build_fixes(posed, sc.detections, poses=sc.poses)
     share = sc.in_view_share
-    rows = []
+    rows: list[tuple[str, TrackingMetrics, int, int | None]] = []
     doc_methods = {}
     for name in methods:
         tracks, m, stubs = _score(fixes, posed, name, sc.truths, config)
-        rows.append((name, m, stubs))
+        rows.append((name, m, stubs, None))
         doc_methods[name] = {**metrics_doc(m, stubs), "in_view_share": round(share, 4)}
-    best = best_method([(n, m) for n, m, _ in rows])
+    best = best_method([(n, m) for n, m, _, _ in rows])
+    for name, m, stubs, early in _server_rows(args, posed, sc, server_batches):
+        rows.append((name, m, stubs, early))
+        doc_methods[name] = {**metrics_doc(m, stubs), "in_view_share": round(share, 4)}
     n = len(sc.detections)
     active_doc = _variant(
         f"active heads (telemetry, latency {latency:g} s)",

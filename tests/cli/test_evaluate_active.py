@@ -28,7 +28,8 @@ def doc(sample_site_dir):
     argv = ["evaluate", "--site", str(sample_site_dir), "--scenario", "active-handoff"]
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
-        assert main([*argv, "--methods", "kalman", "multi-hypothesis-road", "--json"]) == 0
+        methods = ["--methods", "kalman", "multi-hypothesis-road", "--server-method", "none"]
+        assert main([*argv, *methods, "--json"]) == 0
     return json.loads(out.getvalue())
 
 
