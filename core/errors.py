@@ -19,6 +19,7 @@ __all__ = [
     "GeoidError",
     "InputFileError",
     "NotFoundError",
+    "PoseError",
     "QueryError",
     "RaycastError",
     "SettingsError",
@@ -77,6 +78,13 @@ class UnknownSensorError(NotFoundError, SiteError):
 
 class RaycastError(DemtrackError, ValueError):
     """Malformed ray-casting input (ray arrays, range, mode, hit limit)."""
+
+
+class PoseError(CameraError):
+    """An invalid sensor pose or pose series (a :class:`CameraError` as well).
+
+    A non-finite angle, times out of order, a zoom outside the lens's calibration table.
+    """
 
 
 class InputFileError(DemtrackError, ValueError):

@@ -37,6 +37,7 @@ from .api import (
     docs,
     events,
     geolocate,
+    heads,
     health,
     markers,
     scene3d,
@@ -50,6 +51,7 @@ from .api import (
 from .api.deps import READER
 from .api.errors import error_responses, install_error_handlers
 from .cot.service import start_cot_sender
+from .heads.service import start_heads
 from .hub import Hub
 from .ingest.pipeline import Pipeline, Publisher, pipeline_options
 from .replay import Replay, scenario_stream, start_time_after
@@ -141,6 +143,7 @@ def _start_replay(
     settings: Settings,
     scenarios: ScenarioSource,
     after: Any = None,
+    send_poses: Any = None,
 ) -> Replay:
     """Start replaying ``settings.replay``; ``after`` (optional) is called before it plays.
 
@@ -173,6 +176,7 @@ def _start_replay(
     replay = Replay(
         frames,
         pipeline.ingest,
+        send_poses=send_poses,
         speed=settings.replay_speed,
         min_interval_s=settings.replay_batch_s,
     )
@@ -259,6 +263,7 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     app.state.schema_version = store.schema_version()  # /api/health reads no database
     log.info("replayed %(replayed)d fixes, processed %(processed)d detections", counts)
     app.state.console = ConsoleState(settings, site_, store, hub, pipeline, caster)
+    app.state.heads = await run_in_threadpool(start_heads, app.state.console)
     app.state.replay = (
         _start_replay(
             site_,
@@ -267,6 +272,7 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
             settings,
             app.state.scenarios,
             getattr(app.state, "replay_after", None),
+            app.state.console.poses.accept_records,
         )
         if settings.replay
         else None
@@ -276,6 +282,9 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     finally:
         if app.state.replay is not None:  # before the store closes: it ingests
             await run_in_threadpool(app.state.replay.stop)
+        if app.state.heads is not None:  # it feeds poses into the store
+            await run_in_threadpool(app.state.heads.stop)
+        await run_in_threadpool(pipeline.close)  # its pose-message timer writes too
         if scene is not None:
             await run_in_threadpool(scene.stop)
         if cot is not None:
@@ -355,6 +364,7 @@ def create_app(
     app.include_router(health.router)
     app.include_router(site.router, dependencies=READER, responses=read)
     app.include_router(sensors.router, dependencies=READER, responses=read)
+    app.include_router(heads.router)  # its routes name their own token checks
     app.include_router(geolocate.router, dependencies=READER, responses=read)
     app.include_router(detections.router)  # its routes name their own statuses
     app.include_router(tracks.router, dependencies=READER, responses=read)

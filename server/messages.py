@@ -1,11 +1,11 @@
 """WebSocket messages: pydantic models with a ``type`` discriminator.
 
 Server -> client stream messages (``fix``, ``track_update``, ``sensor_status``,
-``event``, ``marker``) carry ``seq``, a number that grows by one per stored message; a client that
-reconnects with ``/ws?since=N&store=<store_id>`` (or sends ``{"type": "resume", "since":
-N}``) is sent every stream message with ``seq > N`` first; a ``since`` of another store
-(``hello.store_id``) or beyond the newest message starts the client over
-(``hello.start_over``). Control messages (``hello``, ``pong``,
+``sensor_pose``, ``event``, ``marker``) carry ``seq``, a number that grows by one per
+stored message; a client that reconnects with ``/ws?since=N&store=<store_id>`` (or
+sends ``{"type": "resume", "since": N}``) is sent every stream message with ``seq > N``
+first; a ``since`` of another store (``hello.store_id``) or beyond the newest message
+starts the client over (``hello.start_over``). Control messages (``hello``, ``pong``,
 ``error``) are not stored and have ``seq: null``. A client that connects with
 ``/ws?batch=1`` may also be sent ``batch`` messages (``seq: null``): several stream
 messages in one frame, in ``seq`` order, each as it would have come alone.
@@ -45,6 +45,7 @@ __all__ = [
     "PongMessage",
     "ResumeMessage",
     "SCHEMA_PATH",
+    "SensorPoseMessage",
     "SensorStatusMessage",
     "ServerMessage",
     "StreamMessage",
@@ -167,6 +168,28 @@ class SensorStatusMessage(_Model):
     n_detections: int
 
 
+class SensorPoseMessage(_Model):
+    """A sensor's newest pose telemetry and its ground footprint at that pose.
+
+    Sent after the batch that stored it, at most about ten a second per sensor (always
+    the newest pose: one held back by the rate limit goes out when the interval ends).
+    Angles in degrees: ``pan_deg`` clockwise from the mount's zero, ``tilt_deg`` up from
+    level, ``roll_deg`` about the optical axis, ``hfov_deg`` the horizontal field of view
+    (null: the calibrated lens). ``footprint``: as ``GET /api/sensors``'s (``enu``
+    border points, ``lonlat`` GeoJSON Polygon, ``complete``, ``n_rays``, ``n_missed``).
+    """
+
+    type: Literal["sensor_pose"] = "sensor_pose"
+    seq: int
+    sensor: str
+    t_s: float = Field(description="the pose's time (UNIX s, UTC)")
+    pan_deg: float
+    tilt_deg: float
+    roll_deg: float
+    hfov_deg: float | None
+    footprint: dict[str, Any] | None = Field(description="ground footprint at this pose")
+
+
 class EventBody(_Model):
     """A detected event, as stored in the ``activity`` table and listed by ``/api/events``.
 
@@ -242,7 +265,12 @@ class MarkerMessage(_Model):
 
 
 StreamMessage = Annotated[
-    FixMessage | TrackUpdateMessage | SensorStatusMessage | EventMessage | MarkerMessage,
+    FixMessage
+    | TrackUpdateMessage
+    | SensorStatusMessage
+    | SensorPoseMessage
+    | EventMessage
+    | MarkerMessage,
     Field(discriminator="type"),
 ]
 
@@ -323,6 +351,7 @@ ServerMessage = Annotated[
     FixMessage
     | TrackUpdateMessage
     | SensorStatusMessage
+    | SensorPoseMessage
     | EventMessage
     | MarkerMessage
     | BatchMessage
@@ -336,6 +365,7 @@ AnyMessage = Annotated[
     FixMessage
     | TrackUpdateMessage
     | SensorStatusMessage
+    | SensorPoseMessage
     | EventMessage
     | MarkerMessage
     | BatchMessage
@@ -351,6 +381,7 @@ _SERVER_TYPES = [
     "fix",
     "track_update",
     "sensor_status",
+    "sensor_pose",
     "event",
     "marker",
     "batch",

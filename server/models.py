@@ -102,6 +102,18 @@ class SensorOut(_Response):
     intrinsics: dict[str, float]
     image: bool
     footprint: dict[str, Any]
+    active: bool = Field(
+        default=False,
+        description="a PTZ head: its detections are geolocated with its pose telemetry",
+    )
+    telemetry: bool = Field(
+        default=False, description="geolocated with pose telemetry (active, or it reported poses)"
+    )
+    pose: dict[str, Any] | None = Field(
+        default=None,
+        description="its newest reported pose (t_s, time_utc, pan/tilt/roll/hfov in degrees);"
+        " null when it never reported one. pan_deg/tilt_deg and footprint are then that pose's",
+    )
 
 
 # ------------------------------------------------------------------ geolocate

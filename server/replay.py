@@ -19,6 +19,13 @@ newest time already stored (the ingest refuses a sensor's time going backwards) 
 from loop to loop. For a busier scene (the console's soak benchmark keeps about 20 tracks
 alive), each scenario can play as several copies staggered over its period, each with its
 own noise seed; the cameras' frame rate and the replayed duration can be chosen too.
+
+A scenario of moving (PTZ) cameras carries each sensor's pose telemetry
+(``scenario.poses``: sensor id -> :class:`~demtrack.core.camera.pose_series.PoseSeries`;
+none when absent). Its samples ride in the frames at their own times (``ReplayFrame.poses``)
+and each batch's poses are posted (``send_poses``, e.g. :meth:`PoseIngest.accept_records
+<demtrack.server.ingest.poses.PoseIngest.accept_records>`) before its detections, per
+sensor in time order, as a head's telemetry would arrive ahead of the video it covers.
 """
 
 from __future__ import annotations
@@ -29,10 +36,11 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from demtrack.core.camera.pose_series import PoseSample, PoseSeries
 from demtrack.core.site.folder import Site
 from demtrack.core.tracking.types import Detection
 
@@ -45,6 +53,7 @@ __all__ = [
     "detection_record",
     "loop_frames",
     "merge_frames",
+    "pose_record",
     "scenario_copies",
     "scenario_frames",
     "scenario_stream",
@@ -70,11 +79,15 @@ class ReplayFrame:
     records : tuple of dict
         Detection records in the ingest format (``{"t", "sensor", "bbox", "class",
         "score"?, "local_id"?}``), all at ``t_s`` from ``sensor``.
+    poses : tuple of dict
+        Pose records of ``sensor`` at ``t_s`` in the pose ingest format (``{"t",
+        "pan_deg", "tilt_deg", "hfov_deg"?, ...}``); empty for a fixed camera.
     """
 
     t_s: float
     sensor: str
     records: tuple[dict[str, Any], ...]
+    poses: tuple[dict[str, Any], ...] = ()
 
 
 def detection_record(d: Detection, t_s: float | None = None) -> dict[str, Any]:
@@ -92,30 +105,54 @@ def detection_record(d: Detection, t_s: float | None = None) -> dict[str, Any]:
     return rec
 
 
-def scenario_frames(detections: Sequence[Detection]) -> list[ReplayFrame]:
-    """Group a scenario's detections into per-camera, per-frame batches, in time order.
+def pose_record(p: PoseSample) -> dict[str, Any]:
+    """The pose ingest record of a sample (``POST /api/sensors/{id}/poses``)."""
+    rec: dict[str, Any] = {"t": p.t_s, "pan_deg": p.pan_deg, "tilt_deg": p.tilt_deg}
+    if p.hfov_deg is not None:
+        rec["hfov_deg"] = p.hfov_deg
+    if p.roll_deg:
+        rec["roll_deg"] = p.roll_deg
+    if p.position_enu is not None:
+        rec["e_m"], rec["n_m"], rec["u_m"] = p.position_enu
+    if p.platform_ypr_deg is not None:
+        rec["yaw_deg"], rec["pitch_deg"], rec["platform_roll_deg"] = p.platform_ypr_deg
+    return rec
+
+
+def scenario_frames(
+    detections: Sequence[Detection], poses: Mapping[str, PoseSeries] | None = None
+) -> list[ReplayFrame]:
+    """Group a scenario's detections (and poses) into per-camera, per-frame batches.
 
     Parameters
     ----------
     detections : sequence of Detection
         In time order (as a :class:`~demtrack.server.scenario_source.ScenarioSource` makes
         them).
+    poses : mapping of str to PoseSeries, optional
+        Each moving sensor's pose telemetry (``scenario.poses``).
 
     Returns
     -------
     list of ReplayFrame
         Ordered by ``(t_s, sensor)``; records keep the scenario's own times.
     """
-    groups: dict[tuple[float, str], list[dict[str, Any]]] = {}
+    groups: dict[tuple[float, str], tuple[list[dict[str, Any]], list[dict[str, Any]]]] = {}
     for d in detections:
-        groups.setdefault((float(d.t_s), d.sensor), []).append(detection_record(d))
-    return [ReplayFrame(t, s, tuple(recs)) for (t, s), recs in sorted(groups.items())]
+        groups.setdefault((float(d.t_s), d.sensor), ([], []))[0].append(detection_record(d))
+    for sensor, series in (poses or {}).items():
+        for p in series.samples():
+            groups.setdefault((float(p.t_s), sensor), ([], []))[1].append(pose_record(p))
+    return [
+        ReplayFrame(t, s, tuple(recs), tuple(ps)) for (t, s), (recs, ps) in sorted(groups.items())
+    ]
 
 
 def _shifted(frame: ReplayFrame, shift_s: float) -> ReplayFrame:
     # Rounded to the microsecond so shifted frame times do not drift in the last bits.
     t = round(frame.t_s + shift_s, 6)
-    return ReplayFrame(t, frame.sensor, tuple({**r, "t": t} for r in frame.records))
+    poses = tuple({**p, "t": round(p["t"] + shift_s, 6)} for p in frame.poses)
+    return ReplayFrame(t, frame.sensor, tuple({**r, "t": t} for r in frame.records), poses)
 
 
 def loop_frames(
@@ -151,7 +188,9 @@ def merge_frames(streams: Iterable[Iterable[ReplayFrame]]) -> Iterator[ReplayFra
     pending: ReplayFrame | None = None
     for f in merged:
         if pending is not None and (f.t_s, f.sensor) == (pending.t_s, pending.sensor):
-            pending = ReplayFrame(f.t_s, f.sensor, pending.records + f.records)
+            pending = ReplayFrame(
+                f.t_s, f.sensor, pending.records + f.records, pending.poses + f.poses
+            )
             continue
         if pending is not None:
             yield pending
@@ -240,7 +279,7 @@ def scenario_stream(
     played = []  # per scenario: each copy's frames, copy 0's truths
     made, rate = scenario_copies(site, names, copies, rate_hz, source=source)
     for _, scenarios in made:
-        frames = [scenario_frames(sc.detections) for sc in scenarios]
+        frames = [scenario_frames(sc.detections, getattr(sc, "poses", None)) for sc in scenarios]
         if frames[0]:
             played.append((frames, scenarios[0].truths))
     if not played:
@@ -271,6 +310,10 @@ class Replay:
     send : callable
         ``send(records)`` ingests one batch (e.g. :meth:`Pipeline.ingest`) and returns
         its acknowledgement (a dict with ``accepted``).
+    send_poses : callable, optional
+        ``send_poses(sensor, records)`` ingests one sensor's pose records; called for a
+        batch's poses (per sensor, in time order) before its detections. None: the
+        frames' poses are dropped.
     speed : float
         Replay-clock seconds per wall-clock second (> 0).
     max_lag_s : float
@@ -304,6 +347,7 @@ class Replay:
         make_frames: Callable[[], Iterable[ReplayFrame]],
         send: Callable[[list[dict[str, Any]]], Any],
         *,
+        send_poses: Callable[[str, list[dict[str, Any]]], Any] | None = None,
         speed: float = 1.0,
         max_lag_s: float = 2.0,
         max_coalesce: int = 240,
@@ -314,6 +358,7 @@ class Replay:
             raise ValueError(f"replay speed must be a positive number, got {speed}")
         self.make_frames = make_frames
         self.send = send
+        self.send_poses = send_poses
         self.speed = float(speed)
         self.max_lag_s = float(max_lag_s)
         self.max_coalesce = max(1, int(max_coalesce))
@@ -360,6 +405,17 @@ class Replay:
             self.error = exc
             log.error("replay stopped: %s", exc)
 
+    def _send_poses(self, batch: Sequence[ReplayFrame]) -> None:
+        """Post the poses of ``batch``'s frames, one call per sensor, in time order."""
+        if self.send_poses is None:
+            return
+        by_sensor: dict[str, list[dict[str, Any]]] = {}
+        for f in batch:
+            if f.poses:
+                by_sensor.setdefault(f.sensor, []).extend(f.poses)
+        for sensor, recs in sorted(by_sensor.items()):
+            self.send_poses(sensor, sorted(recs, key=lambda r: r["t"]))
+
     def _play(self, frames: Iterable[ReplayFrame]) -> None:
         it = iter(frames)
         frame = next(it, None)
@@ -392,6 +448,10 @@ class Replay:
             records = [r for f in batch for r in f.records]
             # The interval runs from the send itself, not from the batch's assembly.
             next_send = -math.inf if behind else self.clock() + self.min_interval_s
+            self._send_poses(batch)
+            if not records and any(f.poses for f in batch):
+                self.t_s = batch[-1].t_s  # poses only: no detection batch to post
+                continue
             ack = self.send(records)
             self.n_batches += 1
             self.n_frames += len(batch)

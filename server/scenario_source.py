@@ -31,6 +31,10 @@ class ReplayScenario(Protocol):
         """The targets' true paths (site frame, m), for spacing concurrent scenarios."""
         ...
 
+    # A scenario of moving cameras may also have ``poses``: sensor id -> PoseSeries (the
+    # heads' telemetry, times from 0). Not part of the protocol: the replay reads it with
+    # ``getattr(scenario, "poses", None)``, so a scenario without one plays as before.
+
 
 class ScenarioSource(Protocol):
     """Names and makes the scenarios a replay may play."""

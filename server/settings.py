@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
@@ -94,6 +94,9 @@ class Settings(BaseSettings):
         Fixes wait this long (scenario time, behind the newest fix) in a reorder buffer so
         slightly out-of-order batches from several cameras are tracked in time order; a
         fix older than what was already tracked is stored with ``tracked: false``.
+    pose_message_interval_s : float
+        Least wall-clock time between two ``sensor_pose`` stream messages of one sensor
+        (s; the newest pose always goes out, at the end of the interval at worst).
     track_retain_s : float
         The live tracker forgets a track that ended more than this long ago (scenario
         time; it stays in SQLite and the API). At least the re-acquisition window (30 s)
@@ -126,6 +129,12 @@ class Settings(BaseSettings):
     cot_queue_size : int
         Batches of stream messages the CoT sender buffers; beyond, they are dropped
         (ingest never waits for the network).
+    heads : {"sim", "off"}
+        Pan-tilt-zoom heads of the site's active sensors: ``sim`` (the default) drives a
+        simulated head for each (an ONVIF head where ``site.json`` configures one); ``off``
+        runs none.
+    heads_period_s : float
+        The head controller's tick (s): status polls, pose feed, follow commands.
     """
 
     model_config = SettingsConfigDict(
@@ -157,6 +166,7 @@ class Settings(BaseSettings):
     viser_port: int = Field(default=8080, ge=0, le=65535)
     scene3d_rays: int = Field(default=40, ge=1, le=1000)
     reorder_lag_s: float = Field(default=0.5, ge=0, le=60, allow_inf_nan=False)
+    pose_message_interval_s: float = Field(default=0.1, ge=0, le=60, allow_inf_nan=False)
     track_retain_s: float = Field(default=600.0, ge=0, allow_inf_nan=False)
     events: bool = True
     events_every_s: float = Field(default=1.0, gt=0, le=3600, allow_inf_nan=False)
@@ -177,6 +187,8 @@ class Settings(BaseSettings):
     cot_stale_s: float = Field(default=60.0, gt=0, le=86_400, allow_inf_nan=False)
     cot_marker_stale_s: float = Field(default=86_400.0, gt=0, le=31_536_000, allow_inf_nan=False)
     cot_queue_size: int = Field(default=1000, gt=0, le=1_000_000)
+    heads: Literal["sim", "off"] = "sim"
+    heads_period_s: float = Field(default=0.1, gt=0, le=10, allow_inf_nan=False)
 
     @field_validator("replay_start_s", mode="before")
     @classmethod

@@ -14,6 +14,7 @@ from demtrack.core.site.folder import Site
 
 from .hub import Hub
 from .ingest.pipeline import Pipeline
+from .ingest.poses import PoseIngest
 from .settings import Settings
 from .store.database import Store
 
@@ -32,6 +33,12 @@ class ConsoleState:
     caster: RayCaster
     cache: dict[str, Any] = field(default_factory=dict)
     cache_lock: threading.RLock = field(default_factory=threading.RLock)
+    #: Pose telemetry in (``accept``) and each sensor's current pose and footprint.
+    poses: PoseIngest = field(default=None)  # type: ignore[assignment]  # made below
+
+    def __post_init__(self) -> None:
+        if self.poses is None:
+            self.poses = PoseIngest(self.pipeline, self.caster)
 
     def cached(self, key: str, make: Any) -> Any:
         """``make()`` once per key (renders, footprints)."""

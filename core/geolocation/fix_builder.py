@@ -26,9 +26,22 @@ Uncertainty
     Along the ray it is at least the variance of the foot-to-centre distance over the
     heading. ``hit_sigma_m`` is the resulting worst-direction sigma.
 
+Poses of the moment
+    A sensor with a pose series in ``poses`` (or marked ``active`` in the site: a PTZ
+    head whose pose comes from telemetry) is geolocated with the pose interpolated at
+    each detection's own time (:meth:`~demtrack.core.camera.pose_series.PoseSeries.at`
+    with the sensor's ``pose_latency_s`` and ``max_pose_gap_s``): pan, tilt, roll, zoom
+    (the lens from the sensor's zoom table, else the ideal zoom), and on a moving
+    platform position and attitude. A detection with no sample close enough, or whose
+    zoom lies outside the sensor's calibration table, is counted ``no_pose`` and gives no
+    fix: never a fix at a stale pose. Rays are made per zoom in the camera frame, each
+    turned by its own rotation, and cast in one batch with the fixed sensors' rays
+    (:mod:`~demtrack.core.geolocation.posed_rays`). Other sensors are geolocated at
+    their stored pan and tilt, exactly as before.
+
 Bad detections (unknown sensor, box beyond the image, time going backwards for its
-sensor) are counted by reason and skipped; a ray that meets no terrain is counted as
-``no_hit`` and gives no fix. Nothing else is dropped.
+sensor, no pose) are counted by reason and skipped; a ray that meets no terrain is
+counted as ``no_hit`` and gives no fix. Nothing else is dropped.
 """
 
 from __future__ import annotations
@@ -40,11 +53,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import TrackingError
+from ..camera.zoom_lens import intrinsics_for_hfov
+from ..errors import PoseError, TrackingError
 from ..tracking.types import Detection, Fix
+from .posed_rays import PosedView, posed_view_rays
 
-if TYPE_CHECKING:  # a type only: the site (a layer above) is what callers pass in
-    from ..site.folder import Site
+if TYPE_CHECKING:  # types only: the site (a layer above) is what callers pass in
+    from ..camera.pose_series import PoseSeries
+    from ..site.folder import Sensor, Site
 
 __all__ = [
     "FIX_REASONS",
@@ -59,7 +75,7 @@ __all__ = [
 #: Nominal footprint (length, width) of each class (m).
 FOOTPRINT_M: dict[str, tuple[float, float]] = {"vehicle": (4.5, 1.8), "human": (0.5, 0.5)}
 #: Reasons a detection gives no fix, in the order they are checked.
-FIX_REASONS = ("unknown_sensor", "outside_image", "time_backwards", "no_hit")
+FIX_REASONS = ("unknown_sensor", "outside_image", "time_backwards", "no_pose", "no_hit")
 
 
 def default_foot_offsets() -> dict[str, float]:
@@ -152,6 +168,7 @@ def build_fixes(
     site: Site,
     detections: Sequence[Detection],
     *,
+    poses: Mapping[str, PoseSeries] | None = None,
     foot_offset_m: Mapping[str, float] | None = None,
     pixel_sigma_px: float = 1.0,
     edge_tolerance_px: float = 1.0,
@@ -165,6 +182,9 @@ def build_fixes(
     detections : sequence of Detection
         In time order per sensor (a record older than its sensor's previous one is
         skipped as ``time_backwards``).
+    poses : mapping of sensor id to PoseSeries, optional
+        Pose telemetry: these sensors (and every ``active`` one, with or without a
+        series) are geolocated at the pose of each detection's moment (module notes).
     foot_offset_m : mapping of class to float, optional
         Distance (m) to move each fix along its ray's ground track, from the box's foot to
         the object's centre (default :func:`default_foot_offsets`).
@@ -187,9 +207,14 @@ def build_fixes(
     by_sensor, counts = _check(detections, site, edge_tolerance_px)
     geo = site.geolocator(pixel_sigma_px=pixel_sigma_px)
     extent_var = footprint_variances()
+    poses = {} if poses is None else poses
     views = []
     order: list[int] = []
+    posed: list[tuple[Sensor, list[int]]] = []
     for sid, idx in by_sensor.items():
+        if sid in poses or site.sensors[sid].active:
+            posed.append((site.sensors[sid], idx))
+            continue
         camera = site.sensors[sid].camera
         w, h = camera.intrinsics.width, camera.intrinsics.height
         boxes = np.array([detections[i].bbox for i in idx], dtype=np.float64).reshape(-1, 4)
@@ -198,8 +223,13 @@ def build_fixes(
         v = np.clip(boxes[:, 3], -0.5, h - 0.5)
         views.append((camera, u, v))
         order += idx
+    parts = geo.pixel_rays(views)
+    for sensor, idx in posed:
+        for view, rows in _posed_views(sensor, poses.get(sensor.id), detections, idx, counts):
+            parts.append(posed_view_rays(view, geo.pixel_sigma_px))
+            order += rows
     # One batch for every sensor: one ray cast, vectorised uncertainty and road rule.
-    batch = geo.locate_pixels(views)
+    batch = geo.locate_ray_parts(parts)
     n_hits = batch.counts
     counts["no_hit"] += int(np.count_nonzero(n_hits == 0))
     n_multi = int(np.count_nonzero(n_hits > 1))
@@ -240,6 +270,54 @@ def build_fixes(
     )
     fixes.sort(key=lambda f: f.detection_index)
     return fixes, FixReport(len(detections), len(fixes), counts, n_multi)
+
+
+def _posed_views(
+    sensor: Sensor,
+    series: PoseSeries | None,
+    detections: Sequence[Detection],
+    idx: list[int],
+    counts: dict[str, int],
+) -> list[tuple[PosedView, list[int]]]:
+    """A posed sensor's detections as views, one per zoom; counts the ``no_pose`` ones.
+
+    Returns each view with the detection indices of its pixels, in order.
+    """
+    if series is None:
+        counts["no_pose"] += len(idx)
+        return []
+    head = sensor.head
+    t = np.array([detections[i].t_s for i in idx], dtype=np.float64)
+    at = series.at(t, max_gap_s=sensor.max_pose_gap_s, latency_s=sensor.pose_latency_s)
+    sel = np.flatnonzero(at.ok)
+    counts["no_pose"] += len(idx) - len(sel)
+    if not len(sel):
+        return []
+    rot = at.camera_rotations(head)[sel]
+    pos = at.positions(head)[sel]
+    hfov = at.hfov_deg[sel]
+    w, h = head.intrinsics.width, head.intrinsics.height
+    boxes = np.array([detections[idx[k]].bbox for k in sel], dtype=np.float64).reshape(-1, 4)
+    u = np.clip(0.5 * (boxes[:, 0] + boxes[:, 2]), -0.5, w - 0.5)
+    v = np.clip(boxes[:, 3], -0.5, h - 0.5)
+    # One lens per distinct zoom (NaN: the calibrated lens).
+    key = np.where(np.isnan(hfov), -1.0, hfov)
+    zooms, group = np.unique(key, return_inverse=True)
+    out = []
+    for g, zoom in enumerate(zooms.tolist()):
+        rows = np.flatnonzero(group == g)
+        try:
+            intr = (
+                head.intrinsics
+                if zoom < 0.0
+                else intrinsics_for_hfov(head.intrinsics, zoom, sensor.zoom)
+            )
+        except PoseError:  # a zoom outside the lens's calibration table: no lens, no fix
+            counts["no_pose"] += len(rows)
+            continue
+        view = PosedView(intr, u[rows], v[rows], rot[rows], pos[rows])
+        out.append((view, [idx[k] for k in sel[rows].tolist()]))
+    return out
 
 
 def _centre_shift(

@@ -348,6 +348,23 @@ class Geolocator:
         CameraError
             If a pixel lies outside its image.
         """
+        return self.locate_ray_parts(self.pixel_rays(views))
+
+    def pixel_rays(
+        self, views: Sequence[tuple[Any, Any, Any]]
+    ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+        """Each view's rays and pixel perturbations, the parts :meth:`locate_ray_parts` takes.
+
+        Parameters
+        ----------
+        views : sequence of (camera, u, v)
+            As :meth:`locate_pixels`.
+
+        Returns
+        -------
+        list of (origins, directions, perturb_axes, perturb_sigmas)
+            One per view, shapes as :meth:`locate_rays` takes them.
+        """
         rays = []
         for camera, u, v in views:
             u_arr, v_arr = _pixels(camera, u, v)
@@ -358,11 +375,24 @@ class Geolocator:
             origins, dirs = camera.pixel_to_ray(u_arr, v_arr)
             axes, sig = _pixel_perturbations(camera, u_arr, v_arr, self.pixel_sigma_px)
             rays.append((origins, dirs, axes, sig))
+        return rays
+
+    def locate_ray_parts(
+        self, parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
+    ) -> HitBatch:
+        """:meth:`locate_rays` on several groups of rays at once, numbered in their order.
+
+        Each part is ``(origins, directions, perturb_axes, perturb_sigmas)`` (what
+        :meth:`pixel_rays` and
+        :func:`~demtrack.core.geolocation.posed_rays.posed_view_rays` make): one ray cast
+        for all of them.
+        """
+        rays = list(parts)
         if not rays:
             rays.append((np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 2, 3)), np.zeros((0, 2))))
         if len(rays) == 1:
             return self.locate_rays(*rays[0])
-        return self.locate_rays(*(np.concatenate(parts) for parts in zip(*rays, strict=True)))
+        return self.locate_rays(*(np.concatenate(p) for p in zip(*rays, strict=True)))
 
     def locate_rays(
         self,

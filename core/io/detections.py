@@ -33,8 +33,17 @@ JSON Lines (UTF-8, one JSON object per line; blank lines are ignored)::
 (one line in the file); ``score`` and ``local_id`` may be absent or null; a numeric
 ``local_id`` is kept as its decimal string.
 
-``class`` is ``vehicle`` or ``human``. Every record is either returned or counted under
-exactly one reason, checked in this order:
+``class`` is ``vehicle`` or ``human``.
+
+Inline pose (a PTZ camera that stamps its pose on each detection): optional fields or
+columns ``pan_deg``, ``tilt_deg`` (both or neither) and ``hfov_deg`` (with them), in the
+sense of :mod:`demtrack.core.camera.pose_series`. The reader hands them back as pose
+samples of the record's sensor and time (:attr:`IngestReport.poses`;
+:func:`demtrack.core.io.pose_io.poses_from_detections` makes series of them). A record
+with half a pose, or one out of range, is ``malformed``; a NaN in one is ``nan``.
+
+Every record is either returned or counted under exactly one reason, checked in this
+order:
 
 ``malformed``
     unparsable line, missing or mistyped field, wrong box length, ``u_min > u_max`` or
@@ -67,12 +76,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
-from ..errors import InputFileError, TimeFormatError
+from ..camera.pose_series import PoseSample
+from ..errors import InputFileError, PoseError, TimeFormatError
 from ..tracking.types import CLASSES, Detection
 from .times import format_utc, parse_iso_time
 
 __all__ = [
     "CSV_COLUMNS",
+    "POSE_FIELDS",
     "REASONS",
     "RELATIVE_BEFORE_S",
     "IngestIssue",
@@ -87,6 +98,8 @@ __all__ = [
 
 #: CSV columns written; the first seven are required (``time`` may stand for ``t``).
 CSV_COLUMNS = ("t", "sensor", "u_min", "v_min", "u_max", "v_max", "class", "score", "local_id")
+#: Optional inline pose columns / fields of a detection record.
+POSE_FIELDS = ("pan_deg", "tilt_deg", "hfov_deg")
 #: Times before this (UNIX seconds: 2000-01-01T00:00:00Z) in a file without an epoch look
 #: like session seconds: the report says so.
 RELATIVE_BEFORE_S = 946684800.0
@@ -135,6 +148,9 @@ class IngestReport:
         No epoch was declared and every accepted time is before 2000-01-01 as UNIX
         seconds: the times were read as seconds after 1970-01-01T00:00:00Z, and are
         most likely session seconds.
+    poses : dict of str to tuple of PoseSample
+        The inline poses of accepted records, per sensor in record order (several
+        detections of one frame repeat one pose); empty when no record has one.
     """
 
     n_records: int
@@ -143,6 +159,7 @@ class IngestReport:
     examples: tuple[IngestIssue, ...] = ()
     epoch_s: float | None = None
     relative: bool = False
+    poses: dict[str, tuple[PoseSample, ...]] = field(default_factory=dict)
 
     @property
     def n_skipped(self) -> int:
@@ -193,6 +210,7 @@ class _Collector:
         self.counts = dict.fromkeys(REASONS, 0)
         self.examples: list[IngestIssue] = []
         self.accepted: list[Detection] = []
+        self.poses: dict[str, list[PoseSample]] = {}
         self.last_t: dict[str, float] = {}
         self.n_records = 0
 
@@ -221,9 +239,12 @@ class _Collector:
 
     def _check(self, rec: Mapping[str, Any]) -> Detection:
         t, box, score = rec["t"], rec["bbox"], rec["score"]
+        pose = rec.get("pose")
         numbers = [t, *box] + ([score] if score is not None else [])
         if not all(math.isfinite(x) for x in numbers):
             raise _Skip("nan", f"non-finite number in t={t}, bbox={box}, score={score}")
+        if pose is not None and not all(math.isfinite(x) for x in pose if x is not None):
+            raise _Skip("nan", f"non-finite number in the inline pose {pose}")
         if box[0] > box[2] or box[1] > box[3]:
             raise _Skip("malformed", f"box {box} has u_min > u_max or v_min > v_max")
         cls, sensor = rec["class"], rec["sensor"]
@@ -244,19 +265,19 @@ class _Collector:
         last = self.last_t.get(sensor)
         if last is not None and t < last:
             raise _Skip("time_backwards", f"t={t} s is before {last} s for sensor {sensor}")
+        if pose is not None:
+            try:
+                sample = PoseSample(t, pose[0], pose[1], pose[2])
+            except PoseError as err:
+                raise _Skip("malformed", f"inline pose: {err}") from None
+            self.poses.setdefault(sensor, []).append(sample)
         self.last_t[sensor] = t
         # checked above as the constructor would (the record's numbers are floats already)
         return Detection._trusted(t, sensor, tuple(box), cls, score, rec["local_id"])  # type: ignore[arg-type]
 
     def time_of(self, value: Any, name: str) -> float:
         """A record's time (UNIX seconds): an ISO string, or a number after the epoch."""
-        if isinstance(value, str) and value.strip() and not _numeric(value):
-            try:
-                return parse_iso_time(value, name)
-            except TimeFormatError as err:
-                raise _Skip("malformed", str(err)) from None
-        t = _float(value, name)
-        return t if self.epoch_s is None else self.epoch_s + t
+        return _time_of(value, name, self.epoch_s)
 
     def result(self) -> tuple[list[Detection], IngestReport]:
         relative = (
@@ -271,8 +292,37 @@ class _Collector:
             tuple(sorted(self.examples, key=lambda e: e.line)),
             self.epoch_s,
             relative,
+            {k: tuple(v) for k, v in self.poses.items()},
         )
         return self.accepted, report
+
+
+def _time_of(value: Any, name: str, epoch_s: float | None) -> float:
+    """A record's time (UNIX seconds): an ISO string, or a number (after ``epoch_s``)."""
+    if isinstance(value, str) and value.strip() and not _numeric(value):
+        try:
+            return parse_iso_time(value, name)
+        except TimeFormatError as err:
+            raise _Skip("malformed", str(err)) from None
+    t = _float(value, name)
+    return t if epoch_s is None else epoch_s + t
+
+
+def _inline_pose(get: Callable[[str], Any]) -> tuple[float, float, float | None] | None:
+    """``(pan, tilt, hfov or None)`` of a record's inline pose fields, None without one.
+
+    ``get(name)`` is the field's value, None when absent or empty.
+    """
+    pan, tilt, hfov = (get(k) for k in POSE_FIELDS)
+    if pan is None and tilt is None and hfov is None:
+        return None
+    if pan is None or tilt is None:
+        raise _Skip("malformed", "an inline pose needs both pan_deg and tilt_deg")
+    return (
+        _float(pan, "pan_deg"),
+        _float(tilt, "tilt_deg"),
+        None if hfov is None else _float(hfov, "hfov_deg"),
+    )
 
 
 @contextmanager
@@ -391,7 +441,11 @@ def read_detections_csv(
             )
         if "t" in header and "time" in header:
             raise InputFileError("detection CSV has both a t and a time column: keep one")
-        pos = {name: header.index(name) for name in (*CSV_COLUMNS, "time") if name in header}
+        pos = {
+            name: header.index(name)
+            for name in (*CSV_COLUMNS, *POSE_FIELDS, "time")
+            if name in header
+        }
         while True:
             try:
                 row = next(reader)
@@ -429,6 +483,7 @@ def _csv_record(row: list[str], pos: Mapping[str, int], col: _Collector) -> dict
         "class": cell("class"),
         "score": _float(score, "score") if score else None,
         "local_id": local_id or None,
+        "pose": _inline_pose(lambda k: cell(k) or None),
     }
 
 
@@ -532,6 +587,7 @@ def _object_record(obj: Any, col: _Collector) -> dict[str, Any]:
         "class": cls,
         "score": None if score is None else _float(score, "score"),
         "local_id": local_id,
+        "pose": _inline_pose(obj.get),
     }
 
 

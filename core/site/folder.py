@@ -18,6 +18,24 @@ Manifest::
      "sensors": [{"id": "cam1", "name": "...", "head": {PanTiltHead.to_dict()},
                   "pan_deg": p, "tilt_deg": t, "image": "images/cam1.png"}]}
 
+A sensor entry may also carry, each written only when not its default:
+
+* ``"roll_deg"`` (0): the camera's bank about its optical axis;
+* ``"active"`` (false): a PTZ head whose pose comes from telemetry
+  (:class:`~demtrack.core.camera.pose_series.PoseSeries`). A detection of an active
+  sensor with no pose close enough in time is counted ``no_pose`` and never geolocated
+  at the stored ``pan_deg`` / ``tilt_deg`` (those stay its resting pose, for display);
+* ``"zoom_table"`` (none): the lens calibrated at several zooms,
+  :meth:`~demtrack.core.camera.zoom_lens.ZoomTable.to_list` rows
+  ``{"hfov_deg", "fx", "fy", "cx", "cy", "k1"?, "k2"?, "p1"?, "p2"?, "k3"?, "k4"?}``;
+* ``"pose_latency_s"`` (0): how late the telemetry's stamps are relative to the frames
+  (s; the pose of a frame at ``t`` is the series at ``t + pose_latency_s``);
+* ``"max_pose_gap_s"`` (0.2): the farthest (s) a detection may be from its nearest pose
+  sample to be geolocated;
+* ``"slew_limits"`` (none): the head's slew limits, a mapping of names to finite numbers
+  (e.g. ``{"pan_rate_deg_s": 60, "tilt_min_deg": -60}``), kept as given for the head
+  simulator and adapters.
+
 Vertical datum (``h = H + N(lat, lon)``; see :mod:`~demtrack.core.geo.geoid`)::
 
     {"geoid": "EGM96"}                       # PROJ's egm96_15.gtx, evaluated per point
@@ -42,6 +60,8 @@ from typing import Any
 
 from ..camera.pantilt import PanTiltHead
 from ..camera.pinhole import Camera
+from ..camera.pose_series import DEFAULT_MAX_GAP_S
+from ..camera.zoom_lens import ZoomTable
 from ..errors import DemtrackError, SiteError, UnknownSensorError
 from ..geo.geodesy import LocalFrame
 from ..geo.geoid import EGM96_GRID, GeoidModel
@@ -72,7 +92,9 @@ class Sensor:
 
     ``roll_deg`` is the camera's bank about its optical axis (0 on a levelled head; a
     fixed camera calibrated from control points may have some), stored in ``site.json``
-    only when non-zero.
+    only when non-zero. ``active``, ``zoom``, ``pose_latency_s``, ``max_pose_gap_s`` and
+    ``slew_limits`` describe a PTZ head whose pose comes from telemetry (the module
+    notes); each is stored only when not its default.
     """
 
     id: str
@@ -82,6 +104,11 @@ class Sensor:
     tilt_deg: float
     image_path: Path | None = None
     roll_deg: float = 0.0
+    active: bool = False
+    zoom: ZoomTable | None = None
+    pose_latency_s: float = 0.0
+    max_pose_gap_s: float = DEFAULT_MAX_GAP_S
+    slew_limits: Mapping[str, float] | None = None
 
     @functools.cached_property
     def camera(self) -> Camera:
@@ -111,6 +138,16 @@ class Sensor:
         }
         if self.roll_deg != 0.0:
             out["roll_deg"] = self.roll_deg
+        if self.active:
+            out["active"] = True
+        if self.zoom is not None:
+            out["zoom_table"] = self.zoom.to_list()
+        if self.pose_latency_s != 0.0:
+            out["pose_latency_s"] = self.pose_latency_s
+        if self.max_pose_gap_s != DEFAULT_MAX_GAP_S:
+            out["max_pose_gap_s"] = self.max_pose_gap_s
+        if self.slew_limits is not None:
+            out["slew_limits"] = dict(self.slew_limits)
         if self.image_path is not None:
             out["image"] = self.image_path.resolve().relative_to(Path(root).resolve()).as_posix()
         return out
@@ -185,6 +222,18 @@ def _sensor(root: Path, doc: Any, k: int) -> Sensor:
     except DemtrackError as exc:
         raise SiteError(f"{where}: {exc}") from None
     image = doc.get("image")
+    active = doc.get("active", False)
+    if not isinstance(active, bool):
+        raise SiteError(f"{where}: 'active' must be true or false, got {active!r}")
+    zoom = None
+    if doc.get("zoom_table") is not None:
+        try:
+            zoom = ZoomTable.from_list(doc["zoom_table"])
+        except DemtrackError as exc:
+            raise SiteError(f"{where}: zoom_table: {exc}") from None
+    gap = _number(doc, "max_pose_gap_s", where, DEFAULT_MAX_GAP_S)
+    if gap < 0.0:
+        raise SiteError(f"{where}: 'max_pose_gap_s' must be >= 0 s, got {gap}")
     return Sensor(
         sid,
         str(doc.get("name", sid)),
@@ -193,7 +242,24 @@ def _sensor(root: Path, doc: Any, k: int) -> Sensor:
         _number(doc, "tilt_deg", where, 0.0),
         _inside(root, image, f"sensors[{sid}].image") if image is not None else None,
         _number(doc, "roll_deg", where, 0.0),
+        active,
+        zoom,
+        _number(doc, "pose_latency_s", where, 0.0),
+        gap,
+        _slew_limits(doc.get("slew_limits"), where),
     )
+
+
+def _slew_limits(value: Any, where: str) -> dict[str, float] | None:
+    """``slew_limits`` as given: a mapping of names to finite numbers (or None)."""
+    if value is None:
+        return None
+    if not isinstance(value, Mapping):
+        raise SiteError(f"{where}: 'slew_limits' must be an object of numbers")
+    for key in value:
+        if not isinstance(key, str):
+            raise SiteError(f"{where}: slew_limits keys must be strings")
+    return {key: _number(value, key, f"{where}: slew_limits") for key in value}
 
 
 def vertical_datum_doc(geoid: GeoidModel, root: Path) -> dict[str, Any]:

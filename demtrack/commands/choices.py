@@ -9,6 +9,8 @@ when a copy goes stale.
 from __future__ import annotations
 
 __all__ = [
+    "ACTIVE_LATENCY_S",
+    "ACTIVE_SCENARIO_NAMES",
     "ACTIVITY_CASE_NAMES",
     "ACTIVITY_SEED",
     "DEFAULT_FREE",
@@ -43,7 +45,16 @@ MANIFEST = "site.json"
 GEOLOCATE_RULES: tuple[str, ...] = ("first", "last", "all", "road")
 
 #: ``sorted(demtrack.samplesite.scenarios.SCENARIOS)``.
-SCENARIO_NAMES: tuple[str, ...] = ("passing-vehicles", "pedestrians", "vehicle-run")
+SCENARIO_NAMES: tuple[str, ...] = (
+    "active-handoff",
+    "passing-vehicles",
+    "pedestrians",
+    "vehicle-run",
+)
+#: ``sorted(demtrack.samplesite.scenarios.ACTIVE_SCENARIOS)``.
+ACTIVE_SCENARIO_NAMES: tuple[str, ...] = ("active-handoff",)
+#: ``demtrack.samplesite.active_scenario.ActiveParams().latency_s``.
+ACTIVE_LATENCY_S = 0.08
 
 #: Defaults of ``demtrack.samplesite.scenarios.ScenarioParams`` the options expose.
 SCENARIO_DEFAULTS: dict[str, float] = {

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -10,7 +11,7 @@ from typing import TYPE_CHECKING
 
 from demtrack.core.errors import InputFileError
 
-from .choices import SCENARIO_NAMES, TRACKING_METHODS
+from .choices import ACTIVE_LATENCY_S, ACTIVE_SCENARIO_NAMES, SCENARIO_NAMES, TRACKING_METHODS
 from .common import add_site_argument
 from .scenario import add_scenario_parameters, params_from_args
 
@@ -144,16 +145,23 @@ def _run(args: argparse.Namespace) -> int:
     if unknown:
         known = ", ".join(TRACKING_METHODS)
         raise InputFileError(f"unknown method(s) {', '.join(unknown)}; known: {known}")
+    if not (math.isfinite(args.latency) and abs(args.latency) <= 10.0):
+        raise InputFileError(f"--latency must be within -10..10 s, got {args.latency:g}")
+    if args.scenario in ACTIVE_SCENARIO_NAMES:
+        return _run_active(args, methods)
     from demtrack.core.geolocation.fix_builder import build_fixes
     from demtrack.core.site.folder import load_site
     from demtrack.core.tracking import evaluate, run_tracker
     from demtrack.samplesite.scenarios import make_scenario
 
+    from .evaluate_active import metrics_doc
+
     params = params_from_args(args)
     site = load_site(args.site)
     sc = make_scenario(site, args.scenario, params)
     fixes, report = build_fixes(site, sc.detections)
-    print(f"{sc.name}: {len(sc.detections)} detections; {report.summary()}")
+    if not args.json:
+        print(f"{sc.name}: {len(sc.detections)} detections; {report.summary()}")
     config = tracking_config()
     results = []
     rows: list[tuple[str, TrackingMetrics, int, int | None]] = []
@@ -174,10 +182,51 @@ def _run(args: argparse.Namespace) -> int:
             m = evaluate(live.tracks, sc.truths)
             results.append((name, list(live.tracks), m))
             rows.append((name, m, n_stubs(live.tracks), len(early_ended(live))))
-    print(format_table(rows))
+    if args.json:
+        share = round(sc.in_view_share, 4)
+        doc = {
+            "scenario": sc.name,
+            "detections": len(sc.detections),
+            "fix_report": {"fixes": report.n_fixes, "skipped": report.counts},
+            "in_view_share": share,
+            "methods": {
+                name: {**metrics_doc(m, stubs), "in_view_share": share}
+                for name, m, stubs, _ in rows
+            },
+        }
+        print(json.dumps(doc, indent=2))
+    else:
+        print(format_table(rows))
     if args.plot is not None:
         plot_tracks(args.plot, site, sc.truths, results, sc.name)
-        print(f"plot -> {args.plot}")
+        if not args.json:
+            print(f"plot -> {args.plot}")
+    return 0
+
+
+def _run_active(args: argparse.Namespace, methods: Sequence[str]) -> int:
+    """An active scenario: the heads' run and its baselines (:mod:`.evaluate_active`)."""
+    from .evaluate_active import format_comparisons, run_active
+
+    doc = run_active(args, methods, tracking_config())
+    rows = [(name, m, stubs, None) for name, m, stubs in doc.pop("_rows")]
+    if args.json:
+        print(json.dumps(doc, indent=2))
+        return 0
+    rep = doc["fix_report"]
+    skipped = ", ".join(f"{k}={v}" for k, v in rep["skipped"].items() if v) or "none"
+    print(
+        f"{doc['scenario']}: {doc['detections']} detections from moving heads"
+        f" ({doc['stats']['handoffs']} hand-offs), generated in {doc['generation_s']:.1f} s;"
+        f" {rep['fixes']} fixes at the telemetry's poses (latency {doc['pose_latency_s']:g} s),"
+        f" skipped: {skipped}"
+    )
+    print(f"target in some camera's view {doc['in_view_share']:.1%} of the run")
+    print(format_table(rows))
+    print(f"\ncompared, with the best method ({doc['best_method']}):")
+    print(format_comparisons(doc))
+    if args.server_method != "none":
+        print("(the server's rows are left out: its offline replay takes no pose telemetry)")
     return 0
 
 
@@ -195,6 +244,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="also score the live server's tracks: the detections through its ingest"
         " pipeline at 1x and 10x batching, with this method (default kalman, the server's;"
         " none: skip)",
+    )
+    p.add_argument("--json", action="store_true", help="print the scores as JSON instead of tables")
+    p.add_argument(
+        "--latency",
+        type=float,
+        default=ACTIVE_LATENCY_S,
+        metavar="S",
+        help="active scenarios: how late the heads' telemetry stamps are (s, default"
+        f" {ACTIVE_LATENCY_S:g}); the sensors' pose_latency_s is set to it",
     )
     add_scenario_parameters(p)
     p.set_defaults(func=_run)

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 from demtrack.core.errors import InputFileError
 
-from .choices import SCENARIO_DEFAULTS, SCENARIO_NAMES
+from .choices import ACTIVE_LATENCY_S, SCENARIO_DEFAULTS, SCENARIO_NAMES
 from .common import add_site_argument, non_negative, non_negative_int
 
 if TYPE_CHECKING:
@@ -59,6 +59,18 @@ def params_from_args(args: argparse.Namespace) -> ScenarioParams:
     )
 
 
+def _poses_path(out: Path, given: str | None) -> Path:
+    """Where an active scenario's pose telemetry goes: ``--poses``, else beside ``out``.
+
+    The default is the detections' name with ``.poses`` before its suffix
+    (``run.jsonl`` -> ``run.poses.jsonl``), in the same format.
+    """
+    path = out.with_name(f"{out.stem}.poses{out.suffix}") if given is None else Path(given)
+    if path.suffix.lower() not in (".csv", ".jsonl", ".ndjson"):
+        raise InputFileError(f"unknown pose file type {path.suffix!r} (use .csv or .jsonl)")
+    return path
+
+
 def _run(args: argparse.Namespace) -> int:
     if not 0.0 <= args.p_miss <= 1.0:
         raise InputFileError(f"--p-miss must be a probability within 0..1, got {args.p_miss:g}")
@@ -67,12 +79,14 @@ def _run(args: argparse.Namespace) -> int:
     if suffix not in (".csv", ".jsonl", ".ndjson"):
         raise InputFileError(f"unknown detection file type {suffix!r} (use .csv or .jsonl)")
     from demtrack.core.io.detections import write_detections_csv, write_detections_jsonl
+    from demtrack.core.io.pose_io import write_poses_csv, write_poses_jsonl
     from demtrack.core.io.times import format_utc
     from demtrack.core.site.folder import load_site
     from demtrack.samplesite.scenarios import make_scenario, write_truth_json
     from demtrack.samplesite.stamping import parse_start, stamp_scenario
 
     t0_s = parse_start(args.start)  # checked before the scenario is made: a quick status 2
+    _poses_path(out, args.poses)  # likewise
     params = params_from_args(args)
     site = load_site(args.site)
     sc = stamp_scenario(make_scenario(site, args.name, params), t0_s)
@@ -82,6 +96,15 @@ def _run(args: argparse.Namespace) -> int:
         write_detections_jsonl(out, sc.detections)
     if args.truth is not None:
         write_truth_json(args.truth, sc)
+    if sc.poses:
+        poses_path = _poses_path(out, args.poses)
+        write_poses = write_poses_csv if poses_path.suffix.lower() == ".csv" else write_poses_jsonl
+        write_poses(poses_path, sc.poses)
+        n = sum(len(p) for p in sc.poses.values())
+        print(
+            f"pose telemetry: {n} samples of {len(sc.poses)} heads -> {poses_path}"
+            f" (stamps {ACTIVE_LATENCY_S:g} s late: set the sensors' pose_latency_s)"
+        )
     s = sc.stats
     print(
         f"{sc.name}: {len(sc.detections)} detections from {s['frames']} frames"
@@ -101,6 +124,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "-o", "--output", required=True, metavar="FILE", help="detections file (.jsonl or .csv)"
     )
     p.add_argument("--truth", metavar="FILE", help="also write the ground truth (JSON)")
+    p.add_argument(
+        "--poses",
+        metavar="FILE",
+        help="active scenarios (active-handoff): where to write the heads' pose telemetry"
+        " (.csv or .jsonl; default beside the detections, NAME.poses.SUFFIX)",
+    )
     p.add_argument(
         "--start",
         metavar="ISO8601",

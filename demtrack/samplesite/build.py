@@ -3,7 +3,9 @@
 The steps follow Collins et al. (1998): grid a helicopter laser scan at 0.5 m with
 per-cell mean, variance and count; fill the holes from a 30 m coarse DEM; calibrate each
 pan-tilt head's yaw from landmark pan readings; then render each camera's view of the
-site by ray casting the DEM and draping the orthophoto. Deterministic for a given seed.
+site by ray casting the DEM and draping the orthophoto. Each sensor is written with its
+head's ``slew_limits`` (it is a PTZ head, at rest: ``active`` stays false).
+Deterministic for a given seed.
 
 The site is anchored at the real Bushy Run with its real vertical datum: ``site.json``
 states EGM96 (PROJ's ``egm96_15.gtx``, Debian's proj-data; N = -33.97 m at the anchor),
@@ -38,7 +40,7 @@ from demtrack.core.site.road_io import write_roads_geojson
 from demtrack.core.terrain.crs_import import local_crs_wkt
 from demtrack.core.terrain.dem import Dem
 
-from .cameras import sighting_heads
+from .cameras import sighting_heads, slew_limits_of
 from .kernel_warmup import load_numba_target
 from .ortho import ortho_grid, paint_orthophoto
 from .scan import coarse_dem, simulate_laser_scan
@@ -136,7 +138,9 @@ def _build(
         cal = head.calibrate()
         calibrated = head.with_mount_yaw(cal.yaw_deg)
         image_path = out / "images" / f"{spec.id}.png"
-        sensor = Sensor(spec.id, spec.name, calibrated, pan, tilt, image_path)
+        sensor = Sensor(
+            spec.id, spec.name, calibrated, pan, tilt, image_path, slew_limits=slew_limits_of(spec)
+        )
         Image.fromarray(render_view(sensor.camera, dem, rgb, grid)).save(image_path)
         return spec, head, cal, sensor
 

@@ -1,5 +1,9 @@
 """The sample site's three pan-tilt cameras and their landmark sightings.
 
+The cameras are pan-tilt-zoom heads (:func:`slew_limits_of`, written to ``site.json`` as
+each sensor's ``slew_limits``), left at rest (``active`` false) for every scenario but
+the active ones, whose heads move (:mod:`.active_scenario`).
+
 Each camera has a true mount yaw (unknown to the operator) and a commanded pan and tilt
 that point it at part of the site. The operator's yaw comes from landmark sightings:
 surveyed points (building corners, road junctions, lot corners) centred in the image with
@@ -18,7 +22,7 @@ from demtrack.core.camera.pinhole import Intrinsics
 
 from .world import PARKING, World
 
-__all__ = ["CameraSpec", "SAMPLE_CAMERAS", "landmark_points", "sighting_heads"]
+__all__ = ["CameraSpec", "SAMPLE_CAMERAS", "landmark_points", "sighting_heads", "slew_limits_of"]
 
 PAN_NOISE_DEG = 0.03
 BLUNDER_DEG = 2.0
@@ -51,6 +55,26 @@ SAMPLE_CAMERAS = (
     CameraSpec("cam2", "Visitor centre roof", 73.0, -61.0, 5.0, (88.0, -90.0), -148.7, 90.0),
     CameraSpec("cam3", "East mast", 142.0, 58.0, 30.0, (40.0, 17.0), -62.1, 76.0),
 )
+
+
+def slew_limits_of(spec: CameraSpec) -> dict[str, float]:
+    """The head's slew limits (``SlewLimits`` field names): a surveillance PTZ head.
+
+    60 and 40 deg/s pan and tilt, 120 deg/s^2, the zoom 10 deg/s of field of view from
+    the lens's own (widest) down to 4 degrees; tilt from 60 degrees down to 20 up. The
+    mast camera's heavier housing turns slower (45 deg/s, 90 deg/s^2).
+    """
+    mast = spec.height_above_surface_m >= 20.0
+    return {
+        "pan_rate_deg_s": 45.0 if mast else 60.0,
+        "tilt_rate_deg_s": 40.0,
+        "accel_deg_s2": 90.0 if mast else 120.0,
+        "zoom_rate_deg_s": 10.0,
+        "tilt_min_deg": -60.0,
+        "tilt_max_deg": 20.0,
+        "hfov_min_deg": 4.0,
+        "hfov_max_deg": spec.hfov_deg,
+    }
 
 
 def landmark_points(world: World) -> dict[str, tuple[float, float, float]]:

@@ -46,6 +46,9 @@ def status(state: StateDep) -> dict[str, Any]:
     counts["ws_clients"] = len(state.hub.clients)
     counts["ws_dropped"] = state.hub.n_dropped
     counts["late_fixes"] = state.pipeline.n_late
+    counts["no_pose"] = state.pipeline.pose_book.n_no_pose  # never geolocated: no pose near
+    counts["poses_stored"] = state.pipeline.pose_book.n_stored
+    counts["pose_waiting"] = len(state.pipeline.pose_book.waiting)
     counts["ingest_commits"] = state.pipeline.n_commits  # group commit: batches per commit
     counts["ingest_batches"] = state.pipeline.n_batches
     return {

@@ -34,6 +34,10 @@ class Request:
     batch_key: str | None
     ack: dict[str, Any] | None = None
     error: BaseException | None = None
+    #: None: a detection batch; a sensor id: a pose batch of that sensor.
+    sensor: str | None = None
+    #: Pose samples the batch stored, per sensor (filled when it is made).
+    samples: dict[str, list[Any]] | None = None
 
 
 class GroupCommit:
@@ -53,13 +57,18 @@ class GroupCommit:
         self.waiting: list[Request] = []
 
     def submit(
-        self, records: Sequence[Any], batch_key: str | None, run: Callable[[list[Request]], None]
+        self,
+        records: Sequence[Any],
+        batch_key: str | None,
+        run: Callable[[list[Request]], None],
+        sensor: str | None = None,
     ) -> dict[str, Any]:
         """Queue one batch; under the lock, ``run`` the group it is part of; its ack.
 
-        Raises what the group's commit raised.
+        ``sensor``: the batch holds that sensor's poses (detections when None). Raises
+        what the group's commit raised.
         """
-        req = Request(records, batch_key)
+        req = Request(records, batch_key, sensor=sensor)
         with self._waiting_lock:
             self.waiting.append(req)
         with self.lock:
@@ -77,19 +86,20 @@ class GroupCommit:
 def commit_group(
     store: Store,
     group: list[Request],
-    make: Callable[[Request], tuple[list[Detection], dict[str, Any]]],
+    make: Callable[[Request], tuple[Any, ...]],
 ) -> tuple[list[tuple[int, Detection]], list[Ack]] | None:
     """Commit ``group``'s batches in one transaction; what to process, or None if it failed.
 
-    ``make(request)``: the batch's accepted detections and report, called inside the
+    ``make(request)``: the batch's accepted detections and report (and, optionally, its
+    pose rows: :data:`~demtrack.server.store.batches.BatchMaker`), called inside the
     transaction in order (so it may depend on the batches before it). Every request gets
     its ``ack`` (or, on failure, the ``error``). Returns the new detections with their ids
     and the acknowledgements of the batches that were not duplicates.
     """
-    made: dict[int, tuple[list[Detection], dict[str, Any]]] = {}
+    made: dict[int, tuple[Any, ...]] = {}
 
     def maker(k: int, req: Request) -> BatchMaker:
-        def run() -> tuple[list[Detection], dict[str, Any]]:
+        def run() -> tuple[Any, ...]:
             made[k] = make(req)
             return made[k]
 
@@ -114,7 +124,7 @@ def commit_group(
         }
         if sb.duplicate:
             continue
-        dets = made[k][0]
+        dets: list[Detection] = list(made[k][0])
         pending += zip(sb.detection_ids, dets, strict=True)
         acks.append((req.ack, max((d.t_s for d in dets), default=None)))
     return pending, acks

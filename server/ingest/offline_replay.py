@@ -8,13 +8,14 @@ detection set through exactly that path, in-process, on a temporary SQLite store
 batching of the console's replay (:func:`~demtrack.server.replay.scenario_frames`
 grouped into batches of ``batch_s`` scenario seconds: 0.1 s at 1x, 1 s at 10x with the
 default 0.1 s wall-time batch interval), and returns the tracks the store then holds
-(what the API serves) with the track events the stream announced.
+(what the API serves) with the track events the stream announced. Moving cameras' pose
+telemetry (``poses``) is posted with the batches, each batch's poses before its detections.
 """
 
 from __future__ import annotations
 
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -22,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from demtrack.core.activity.kinds import EventKind
+from demtrack.core.camera.pose_series import PoseSeries
 from demtrack.core.errors import TrackingError
 from demtrack.core.site.folder import Site
 from demtrack.core.tracking.types import Detection, Track, TrackPoint
@@ -29,6 +31,7 @@ from demtrack.core.tracking.types import Detection, Track, TrackPoint
 from ..replay import scenario_frames
 from ..store.database import Store
 from .pipeline import Pipeline
+from .pose_values import parse_pose_records
 
 __all__ = ["LiveReplay", "early_ended", "replay_detections", "stubs", "track_from_body"]
 
@@ -86,16 +89,28 @@ def early_ended(replay: LiveReplay) -> list[int]:
     return sorted({i for i, t in replay.ended if last.get(i, -np.inf) > t})
 
 
-def _batches(detections: Sequence[Detection], batch_s: float) -> list[list[dict[str, Any]]]:
-    frames = scenario_frames(sorted(detections, key=lambda d: d.t_s))
-    out: list[list[dict[str, Any]]] = []
+#: One ingest call: its detection records and each sensor's pose records.
+Batch = tuple[list[dict[str, Any]], dict[str, list[dict[str, Any]]]]
+
+
+def _batches(
+    detections: Sequence[Detection],
+    batch_s: float,
+    poses: Mapping[str, PoseSeries] | None = None,
+) -> list[Batch]:
+    frames = scenario_frames(sorted(detections, key=lambda d: d.t_s), poses)
+    out: list[Batch] = []
     k = 0
     while k < len(frames):
         j = k + 1
         # a frame belongs to the batch of the first frame less than batch_s before it
         while j < len(frames) and frames[j].t_s - frames[k].t_s < batch_s - 1e-9:
             j += 1
-        out.append([r for f in frames[k:j] for r in f.records])
+        by_sensor: dict[str, list[dict[str, Any]]] = {}
+        for f in frames[k:j]:
+            if f.poses:
+                by_sensor.setdefault(f.sensor, []).extend(f.poses)
+        out.append(([r for f in frames[k:j] for r in f.records], by_sensor))
         k = j
     return out
 
@@ -108,6 +123,7 @@ def replay_detections(
     batch_s: float = 0.1,
     reorder_lag_s: float = 0.5,
     db_dir: str | Path | None = None,
+    poses: Mapping[str, PoseSeries] | None = None,
 ) -> LiveReplay:
     """Post ``detections`` to an in-process pipeline in batches; the tracks it stored.
 
@@ -125,6 +141,8 @@ def replay_detections(
         The server's reorder lag (s).
     db_dir : path, optional
         Folder of the temporary store (default: the system's temporary folder).
+    poses : mapping of str to PoseSeries, optional
+        Moving sensors' pose telemetry (``scenario.poses``), posted with the batches.
     """
     if not batch_s > 0:
         raise TrackingError(f"replay batch must be a positive number of seconds, got {batch_s}")
@@ -141,14 +159,18 @@ def replay_detections(
             elif m["kind"] == EventKind.TRACK_CONFIRMED.value:
                 confirmed.append((int(ev["track_ids"][0]), float(ev["t_start_s"])))
 
-    batches = _batches(detections, batch_s)
+    batches = _batches(detections, batch_s, poses)
     with tempfile.TemporaryDirectory(dir=db_dir) as tmp:
         store = Store(Path(tmp) / "replay.sqlite3")
         try:
             pipeline = Pipeline(site, store, method, publish, reorder_lag_s=reorder_lag_s)
             pipeline.start()
-            for records in batches:
-                pipeline.ingest(records)
+            for records, by_sensor in batches:
+                for sensor, recs in sorted(by_sensor.items()):
+                    head_u = float(site.sensor(sensor).head.position_enu[2])
+                    pipeline.ingest_poses(sensor, parse_pose_records(recs, sensor, head_u))
+                if records:
+                    pipeline.ingest(records)
             tracks = tuple(track_from_body(b) for b in store.tracks())
         finally:
             store.close()

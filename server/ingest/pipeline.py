@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -39,6 +40,9 @@ from ..store.integrity import StoreUnavailableError
 from .events import event_message, ingest_message
 from .fix_codec import fix_bodies, fixes_from_bodies
 from .group_commit import Ack, GroupCommit, Request, commit_group
+from .pose_book import WINDOW_S, PoseBook
+from .pose_stream import PoseAnnouncer
+from .pose_values import ParsedPoses
 from .publish import Publisher, sensor_status_messages, store_and_publish
 from .reorder import ReorderBuffer
 from .replay_on_start import load_stored_fixes
@@ -84,6 +88,7 @@ def pipeline_options(settings: Any) -> dict[str, Any]:
             else None
         ),
         "zones_path": settings.zones_path or settings.site / "zones.geojson",
+        "pose_interval_s": settings.pose_message_interval_s,
     }
 
 
@@ -108,6 +113,8 @@ class Pipeline:
         Forget ended tracks whose last fix is more than this far behind the newest
         tracked one (s; at least the tracker's re-acquisition window and the live events'
         window are kept). They stay in the store.
+    pose_interval_s : float
+        Least wall-clock time between two ``sensor_pose`` messages of one sensor (s).
     """
 
     def __init__(
@@ -121,6 +128,7 @@ class Pipeline:
         events: LiveEventParams | None = None,
         zones_path: Any = None,
         retain_ended_s: float = 600.0,
+        pose_interval_s: float = 0.1,
     ) -> None:
         self.site = site
         self.store = store
@@ -145,6 +153,12 @@ class Pipeline:
         self.n_late = 0
         self._last_t: dict[str, float] = {}
         self._n_det: dict[str, int] = {}
+        #: Pose telemetry: checked samples, rolling series, deferred detections.
+        self.pose_book = PoseBook(site)
+        #: ``sensor_pose`` messages, rate-limited per sensor.
+        self.announcer = PoseAnnouncer(pose_interval_s)
+        self._flush_timer: threading.Timer | None = None
+        self._inline: dict[str, Any] | None = None
 
     # ------------------------------------------------------------- components
     @property
@@ -198,6 +212,8 @@ class Pipeline:
         with self._lock:
             self._last_t = self.store.last_times()
             self._n_det = self.store.sensor_counts()
+            # The poses first: the unprocessed detections below are geolocated with them.
+            self.pose_book.load(self.store.recent_poses(WINDOW_S), self.store.pose_last_times())
             load_stored_fixes(self.store, self.buffer)
             dropped: set[int] = set()
 
@@ -220,19 +236,23 @@ class Pipeline:
                 self.live_events = LiveEvents(self.site, self.event_params, known)
                 if math.isfinite(self.feed.released_t):
                     self.live_events.last_eval_t = self.feed.released_t
-            processed = 0
-            while True:
-                pending = self.store.detections(0, 5000, unprocessed=True)
+            processed, after = 0, 0
+            while True:  # by id: detections waiting for their pose stay unprocessed
+                pending = self.store.detections(after, 5000, unprocessed=True)
                 if not pending:
                     break
+                after = pending[-1][0]
                 self._process(pending)
                 processed += len(pending)
             return {"replayed": replayed, "processed": processed}
 
     # ------------------------------------------------------------------ ingest
     def _validate(self, records: Sequence[Any]) -> tuple[list[Detection], dict[str, Any]]:
-        """Check records with the detection-file rules (:mod:`.validate`)."""
-        return validate_records(records, self._last_t, self.sizes)
+        """Check records with the detection-file rules (:mod:`.validate`).
+
+        Their inline poses go to ``self._inline`` (per sensor) when it is a dict.
+        """
+        return validate_records(records, self._last_t, self.sizes, self._inline)
 
     def ingest(self, records: Sequence[Any], batch_key: str | None = None) -> dict[str, Any]:
         """Validate, store durably, then geolocate, track and publish one batch.
@@ -247,13 +267,46 @@ class Pipeline:
         """
         return self.commits.submit(records, batch_key, self._ingest_group)
 
-    def _accept(self, req: Request) -> tuple[list[Detection], dict[str, Any]]:
-        """Validate one request after the batches before it and count its detections."""
+    def ingest_poses(
+        self, sensor: str, samples: Sequence[Any], batch_key: str | None = None
+    ) -> dict[str, Any]:
+        """Store one sensor's pose samples durably, as :meth:`ingest` stores detections.
+
+        ``samples``: :class:`~demtrack.core.camera.pose_series.PoseSample` values, or the
+        :class:`~.pose_values.ParsedPoses` of posted records. They share the group
+        commit with detection batches; once committed they join the sensor's series,
+        detections waiting for them are geolocated and a ``sensor_pose`` message goes out.
+        """
+        parsed = samples if isinstance(samples, ParsedPoses) else ParsedPoses.of(samples)
+        return self.commits.submit(parsed, batch_key, self._ingest_group, sensor=sensor)
+
+    def _accept(self, req: Request) -> tuple[Any, ...]:
+        """Validate one request after the batches before it and count its detections.
+
+        Returns its detections, its report and its pose rows.
+        """
+        book = self.pose_book
+        if req.sensor is not None:
+            kept, ack = book.check(req.sensor, req.records)
+            req.samples = {req.sensor: kept} if kept else {}
+            return [], {**ack, "kind": "poses", "sensor": req.sensor}, book.rows(req.sensor, kept)
+        inline: dict[str, Any] = {}
+        self._inline = inline  # _validate fills it (tests replace _validate itself)
         dets, ack = self._validate(req.records)
         for d in dets:
             self._last_t[d.sensor] = max(d.t_s, self._last_t.get(d.sensor, d.t_s))
             self._n_det[d.sensor] = self._n_det.get(d.sensor, 0) + 1
-        return dets, ack
+        req.samples, rows = {}, []
+        for sensor, samples in sorted(inline.items()):
+            kept, pose_ack = book.check(sensor, ParsedPoses.of(samples), quiet_duplicates=True)
+            if kept:
+                req.samples[sensor] = kept
+                rows += book.rows(sensor, kept)
+            if pose_ack["skipped"]:
+                ack["pose_skipped"] = ack.get("pose_skipped", 0) + pose_ack["skipped"]
+        if rows:
+            ack["poses"] = len(rows)
+        return dets, ack, rows
 
     def _commit(self, group: list[Request]) -> tuple[list[tuple[int, Detection]], list[Ack]] | None:
         """Commit ``group`` in one transaction (:func:`.group_commit.commit_group`).
@@ -262,9 +315,11 @@ class Pipeline:
         request of ``group`` carries the error.
         """
         last_t, n_det = dict(self._last_t), dict(self._n_det)
+        pose_t = dict(self.pose_book.last_t)
         out = commit_group(self.store, group, self._accept)
         if out is None:
             self._last_t, self._n_det = last_t, n_det
+            self.pose_book.last_t = pose_t
             return None
         self.n_commits += 1
         self.n_batches += len(group)
@@ -297,8 +352,10 @@ class Pipeline:
         self._log_refused([r for r in group if r.error is not None])
         if not acks:
             return
+        posed = self._take_poses(group)
+        acks = [a for a in acks if a[0].get("kind") != "poses"]
         try:
-            self._process(pending, acks=acks)
+            self._process(pending, acks=acks, posed=posed)
         except StoreUnavailableError as exc:  # durable batches; start-up replays them
             log.error("processing after commit stopped: %s", exc)
         except Exception:  # the batches are durable; start-up replays what failed here
@@ -313,6 +370,46 @@ class Pipeline:
                 log.error("ingest batch refused: %s", req.error)
             elif req.error is not None:
                 log.error("ingest batch failed: %r", req.error, exc_info=req.error)
+
+    # ------------------------------------------------------------------- poses
+    def _take_poses(self, group: Sequence[Request]) -> set[str]:
+        """Add the committed batches' pose samples to the series; the sensors they moved."""
+        moved: set[str] = set()
+        for req in group:
+            if req.error is not None or req.ack is None or req.ack.get("duplicate"):
+                continue
+            for sensor, samples in (req.samples or {}).items():
+                self.pose_book.extend(sensor, samples)
+                moved.add(sensor)
+        return moved
+
+    def _arm_pose_flush(self) -> None:
+        """Start a timer for the ``sensor_pose`` messages the rate limit held back."""
+        delay = self.announcer.next_flush_s()
+        if delay is None or (self._flush_timer is not None and self._flush_timer.is_alive()):
+            return
+        self._flush_timer = threading.Timer(delay + 1e-3, self.flush_poses)
+        self._flush_timer.daemon = True
+        self._flush_timer.start()
+
+    def flush_poses(self) -> None:
+        """Send the held-back ``sensor_pose`` messages whose interval has passed."""
+        try:
+            with self._lock:
+                self._flush_timer = None
+                events = self.announcer.flush(self.pose_book.newest)
+                if events:
+                    store_and_publish(self.store, self.publish, [], [], events, [])
+                self._arm_pose_flush()
+        except Exception:  # noqa: BLE001 - a timer thread: log, never raise
+            log.exception("sending held-back sensor_pose messages failed")
+
+    def close(self) -> None:
+        """Stop the pose flush timer (before the store closes)."""
+        with self._lock:
+            if self._flush_timer is not None:
+                self._flush_timer.cancel()
+                self._flush_timer = None
 
     # -------------------------------------------------------------- processing
     def _drop_ended(self) -> list[int]:
@@ -336,24 +433,72 @@ class Pipeline:
         )
         return bodies, unfilled
 
-    def _process(self, pending: list[tuple[int, Detection]], *, acks: Sequence[Ack] = ()) -> None:
+    def _geolocate(
+        self, pending: list[tuple[int, Detection]]
+    ) -> tuple[list[dict[str, Any] | None], list[Geodetic], np.ndarray]:
+        """Fix bodies of ``pending`` (None: no fix) and which of them have no pose.
+
+        Telemetry sensors' detections are geolocated with their pose series
+        (:mod:`.pose_book`); those without a pose close enough are not geolocated.
+        """
+        dets = [d for _, d in pending]
+        no_pose = self.pose_book.no_pose(dets)
+        if not no_pose.any():
+            fixes, _ = build_fixes(self.site, dets, **self._pose_kwargs(dets))
+            bodies, unfilled = self._fix_bodies(pending, fixes)
+            return bodies, unfilled, no_pose
+        keep = np.flatnonzero(~no_pose).tolist()
+        sub = [pending[i] for i in keep]
+        sub_dets = [d for _, d in sub]
+        fixes, _ = build_fixes(self.site, sub_dets, **self._pose_kwargs(sub_dets))
+        sub_bodies, unfilled = self._fix_bodies(sub, fixes)
+        bodies: list[dict[str, Any] | None] = [None] * len(pending)
+        for i, b in zip(keep, sub_bodies, strict=True):
+            bodies[i] = b
+        return bodies, unfilled, no_pose
+
+    def _pose_kwargs(self, dets: Sequence[Detection]) -> dict[str, Any]:
+        """``build_fixes``'s ``poses`` argument for ``dets`` (none: the fixed path as before)."""
+        poses = self.pose_book.for_fixes(dets)
+        return {"poses": poses} if poses else {}
+
+    def _process(
+        self,
+        pending: list[tuple[int, Detection]],
+        *,
+        acks: Sequence[Ack] = (),
+        posed: set[str] | frozenset[str] = frozenset(),
+    ) -> None:
         """Geolocate, track, detect events, store and publish ``pending`` detections.
 
         ``acks``: each ingested batch's acknowledgement and newest detection time, for
-        its ``ingest`` message.
+        its ``ingest`` message. ``posed``: sensors whose poses just changed (their
+        ``sensor_pose`` messages go with this batch's). Telemetry detections whose pose
+        is not settled wait (:meth:`.PoseBook.split`); those that waited and now are
+        settled or due join ``pending``.
         """
+        horizon = max(self._last_t.values(), default=-math.inf) - self.reorder_lag_s
+        batch_sensors = sorted({d.sensor for _, d in pending})
+        pending = self.pose_book.split(pending, horizon)
         dets = [d for _, d in pending]
-        fixes, _ = build_fixes(self.site, dets)
         # The bodies' geodetic fields are filled by the track points' conversion below:
         # one pyproj round trip per batch, not two.
-        bodies, unfilled = self._fix_bodies(pending, fixes)
+        bodies, unfilled, no_pose = self._geolocate(pending)
         fixed = {det_id for (det_id, _), body in zip(pending, bodies, strict=True) if body}
         rows: list[FixRow] = []
-        events: list[tuple[str, StreamPayload]] = []
-        for (det_id, d), body in zip(pending, bodies, strict=True):
+        events: list[tuple[str, StreamPayload]] = list(
+            self.announcer.due(posed, self.pose_book.newest)
+        )
+        n_no_pose: dict[int, int] = {}
+        for (det_id, d), body, np_ in zip(pending, bodies, no_pose.tolist(), strict=True):
             if body is None:
+                status = "no_pose" if np_ else "no_fix"
                 body = {"detection_id": det_id, "hits": None, "tracked": False}
-                rows.append((det_id, d.t_s, d.sensor, d.cls, "no_fix", body))
+                if np_:
+                    body["reason"] = "no_pose"
+                    self.pose_book.n_no_pose += 1
+                    n_no_pose[det_id] = 1
+                rows.append((det_id, d.t_s, d.sensor, d.cls, status, body))
                 continue
             if not self.buffer.admit((body["t_s"], body["sensor"], det_id)):
                 body["tracked"] = False
@@ -382,15 +527,18 @@ class Pipeline:
                     if body["state"] != "update":
                         events.append(("event", event_message(body)))
         events += sensor_status_messages(
-            sorted({d.sensor for d in dets}), self._last_t, self._n_det
+            sorted({*batch_sensors, *(d.sensor for d in dets)}), self._last_t, self._n_det
         )
         for ack, t in acks:
             n_fixes = sum(1 for i in ack["detection_ids"] if i in fixed)
+            if n_no_pose:
+                ack["no_pose"] = sum(1 for i in ack["detection_ids"] if i in n_no_pose)
             events.append(("event", ingest_message(ack, n_fixes, t)))
         store_and_publish(
             self.store, self.publish, rows, track_rows, events, activity, self.bodies.stored
         )
         self._drop_ended()  # after their final rows are stored
+        self._arm_pose_flush()
 
     def _ended_since(self, released_before: float, live_ids: set[int]) -> list[Track]:
         """Ended tracks this release may have changed: live at the last batch, or new.

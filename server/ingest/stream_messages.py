@@ -18,6 +18,7 @@ __all__ = [
     "EventPayload",
     "FixPayload",
     "IngestPayload",
+    "SensorPosePayload",
     "SensorStatusPayload",
     "StreamPayload",
     "TrackUpdatePayload",
@@ -44,6 +45,18 @@ class SensorStatusPayload(msgspec.Struct, tag_field="type", tag="sensor_status",
     n_detections: int
 
 
+class SensorPosePayload(msgspec.Struct, tag_field="type", tag="sensor_pose", frozen=True):
+    """``sensor_pose``: a sensor's newest pose (degrees, UNIX s) and its ground footprint."""
+
+    sensor: str
+    t_s: float
+    pan_deg: float
+    tilt_deg: float
+    roll_deg: float
+    hfov_deg: float | None
+    footprint: dict[str, Any] | None
+
+
 class EventPayload(msgspec.Struct, tag_field="type", tag="event", frozen=True):
     """``event`` of a detected event: its log line and its activity body (``event``)."""
 
@@ -61,4 +74,11 @@ class IngestPayload(msgspec.Struct, tag_field="type", tag="event", frozen=True):
     text: str
 
 
-StreamPayload = FixPayload | TrackUpdatePayload | SensorStatusPayload | EventPayload | IngestPayload
+StreamPayload = (
+    FixPayload
+    | TrackUpdatePayload
+    | SensorStatusPayload
+    | SensorPosePayload
+    | EventPayload
+    | IngestPayload
+)

@@ -43,6 +43,7 @@ def validate_records(
     records: Sequence[Any],
     last_t: Mapping[str, float],
     sizes: Mapping[str, tuple[int, int]],
+    poses_out: dict[str, Any] | None = None,
 ) -> tuple[list[Detection], dict[str, Any]]:
     """The accepted detections of ``records`` and the acknowledgement's counts.
 
@@ -54,6 +55,9 @@ def validate_records(
         Each sensor's latest stored detection time (s).
     sizes : mapping of str to (int, int)
         Each sensor's image ``(width_px, height_px)``.
+    poses_out : dict, optional
+        Filled with the inline poses of the accepted records (``pan_deg``, ``tilt_deg``,
+        ``hfov_deg`` fields): sensor id -> tuple of PoseSample, in record order.
     """
     named = {
         r["sensor"] for r in records if isinstance(r, dict) and isinstance(r.get("sensor"), str)
@@ -66,6 +70,8 @@ def validate_records(
     dets, report = read_detection_records(
         [*seeds, *records], sensors=sizes, max_examples=MAX_ISSUES
     )
+    if poses_out is not None:
+        poses_out.update(report.poses)
     n_seed = len(seeds)
     if len(dets) < n_seed or report.n_records != n_seed + len(records):
         raise RuntimeError("internal: detection seed records were not accepted")

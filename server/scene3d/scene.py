@@ -30,6 +30,7 @@ from .connections import (
     websocket_path,
 )
 from .following import FollowController
+from .frusta import FrustumPoses
 from .rays import RayLayer
 from .static import build_static, configure_gui
 from .tracks import TrackLayer
@@ -105,6 +106,8 @@ class Scene3D:
         self._ready = threading.Event()
         self._rays = RayLayer(self.server, site.sensors, self.nodes, max_rays)
         self._tracks = TrackLayer(self.server, self.nodes)
+        #: PTZ frusta: each sensor's newest pose, applied once per render.
+        self.poses = FrustumPoses(site.sensors, self.nodes)
         self._following = FollowController(self.server, self._tracks, self._on_track)
         self.server.on_client_connect(self._on_client_connect)
         self.server.on_client_disconnect(self._on_client_disconnect)
@@ -115,7 +118,7 @@ class Scene3D:
     def publish(self, messages: list[dict[str, Any]]) -> None:
         """Queue stream messages (any thread; never blocks). The oldest drop when full."""
         for m in messages:
-            if m.get("type") in ("fix", "track_update"):
+            if m.get("type") in ("fix", "track_update", "sensor_pose"):
                 if len(self._inbox) >= self._inbox_max:
                     self._inbox.popleft()
                     self.n_dropped += 1
@@ -246,6 +249,8 @@ class Scene3D:
                 self._rays.add_fix(m["fix"])
             elif kind == "track_update":
                 self._on_track(m["track"])
+            elif kind == "sensor_pose":
+                self.poses.offer(m)
             elif kind == "_follow":
                 self._following.on_follow(m["track_id"], m.get("track"), m.get("session"))
             elif kind == "_client":
@@ -263,6 +268,7 @@ class Scene3D:
         self._rays.choose(body.get("points") or [])
 
     def _render(self) -> None:
+        self.poses.render()
         self._rays.render()
         self._tracks.render(self._following.followed_ids)
         self._following.update()

@@ -29,12 +29,15 @@ Tables
                     rewrites only its points from the first that changed (new points and
                     the smoother's revised tail), not its whole history; readers get
                     the whole body back (:func:`.codec.track_body_text`), the same text as before.
+``poses``           each sensor's pose telemetry, one JSON body per ``(sensor, t_s)``,
+                    stored with the batch that carried it (migration 7; :mod:`.poses`)
 
 Modules
 -------
 :mod:`.schema`     the tables, one function per migration
 :mod:`.codec`      the JSON codec shared by the store and the stream
 :mod:`.batches`    durable ingest batches (group commit)
+:mod:`.poses`      pose telemetry rows
 :mod:`.derived`    fixes, tracks, activity and event-log writes
 :mod:`.queries`    read-side SQL
 :mod:`.integrity`  the store's id, the file check before each write, a full disk

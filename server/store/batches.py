@@ -1,4 +1,4 @@
-"""Durable ingest: batches and their accepted detections, several per transaction.
+"""Durable ingest: batches, their accepted detections and poses, several per transaction.
 
 :func:`insert_batch_rows` runs inside the store's write transaction (committed with
 ``synchronous=FULL``: when it returns to the caller the batch is on disk). A batch whose
@@ -12,14 +12,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from demtrack.core.tracking.types import Detection
-
 from .codec import dumps_json, loads_json
+from .poses import insert_pose_rows
 
 __all__ = ["BatchMaker", "StoredBatch", "insert_batch_rows"]
 
-#: ``make()`` -> the batch's accepted detections and report (called inside the transaction).
-BatchMaker = Callable[[], tuple[Sequence[Detection], dict[str, Any]]]
+#: ``make()`` -> the batch's accepted detections and report, and optionally its pose rows
+#: (:data:`.poses.PoseRow`, a third element), called inside the transaction.
+BatchMaker = Callable[[], tuple[Any, ...]]
 
 
 @dataclass(frozen=True)
@@ -66,7 +66,9 @@ def insert_batch_rows(
                 )
                 out.append(StoredBatch(row[0], known, loads_json(row[1]), duplicate=True))
                 continue
-        detections, report = make()
+        made = make()
+        detections, report = made[0], made[1]
+        poses = made[2] if len(made) > 2 else ()
         # One statement gives the batch's id and the detections' highest id.
         ((batch_id, last_id),) = c.execute(
             "INSERT INTO batches (batch_key, n_records, n_accepted, report)"
@@ -86,5 +88,7 @@ def insert_batch_rows(
                 for i, d in zip(ids, detections, strict=True)
             ],
         )
+        if poses:
+            insert_pose_rows(c, batch_id, poses)
         out.append(StoredBatch(batch_id, ids, report))
     return out

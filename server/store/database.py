@@ -25,6 +25,7 @@ from .batches import BatchMaker, StoredBatch, insert_batch_rows
 from .codec import loads_json, track_body_text
 from .derived import FixRow, write_derived_rows
 from .integrity import FileIdentity, ensure_store_id, translate_write_error
+from .poses import pose_last_times, pose_rows_in_window, recent_pose_rows
 from .queries import detection_row, points_of, read_track_rows, track_where, window_where
 from .schema import COUNTED_TABLES
 
@@ -40,6 +41,7 @@ MIGRATIONS: tuple[schema.Migration, ...] = (
     schema.m4_track_points,
     schema.m5_row_counts,
     schema.m6_markers,
+    schema.m7_poses,
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 
@@ -274,6 +276,27 @@ class Store:
             s: int(n)
             for s, n in self._rows("SELECT sensor, COUNT(*) FROM detections GROUP BY sensor")
         }
+
+    def pose_last_times(self) -> dict[str, float]:
+        """Each sensor's newest stored pose time (s)."""
+        with self._rlock:
+            return pose_last_times(self._r)
+
+    def poses(
+        self,
+        sensor: str,
+        t_from: float | None = None,
+        t_to: float | None = None,
+        limit: int = 1_000_000,
+    ) -> list[dict[str, Any]]:
+        """Stored pose bodies of ``sensor`` in ``[t_from, t_to]`` (s), in time order."""
+        with self._rlock:
+            return pose_rows_in_window(self._r, sensor, t_from, t_to, limit)
+
+    def recent_poses(self, window_s: float) -> dict[str, list[dict[str, Any]]]:
+        """Each sensor's pose bodies at most ``window_s`` behind its newest (start-up)."""
+        with self._snapshot() as r:
+            return recent_pose_rows(r, window_s)
 
     def detections(
         self, after_id: int = 0, limit: int = 1000, *, unprocessed: bool = False

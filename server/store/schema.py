@@ -19,6 +19,7 @@ __all__ = [
     "m4_track_points",
     "m5_row_counts",
     "m6_markers",
+    "m7_poses",
 ]
 
 #: One schema step: run inside the transaction :func:`migrate` opens.
@@ -174,4 +175,16 @@ def m6_markers(conn: sqlite3.Connection) -> None:
     conn.execute(
         "CREATE TABLE markers (id INTEGER PRIMARY KEY AUTOINCREMENT, t_s REAL NOT NULL,"
         " body TEXT NOT NULL)"
+    )
+
+
+def m7_poses(conn: sqlite3.Connection) -> None:
+    """Version 7: ``poses``, each sensor's pose telemetry (one JSON body per sample)."""
+    # One row per (sensor, time): a sensor's poses go forwards in time (the ingest refuses
+    # older ones), so the key is also the order the pipeline reloads them in. WITHOUT
+    # ROWID: the key is the table's only index.
+    conn.execute(
+        "CREATE TABLE poses (sensor TEXT NOT NULL, t_s REAL NOT NULL,"
+        " batch_id INTEGER NOT NULL REFERENCES batches(id), body TEXT NOT NULL,"
+        " PRIMARY KEY (sensor, t_s)) WITHOUT ROWID"
     )

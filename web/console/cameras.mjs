@@ -71,11 +71,12 @@ export class CameraPanel {
     this.img = el("img", { class: "cam-img", alt: `${sensor.id} image`, draggable: "false" });
     this.canvas = el("canvas", { class: "cam-overlay" });
     this.status = el("span", { class: "cam-status", text: "" });
+    this.pose = el("span", { class: "cam-pose", text: "" });
     this.wrap = el("div", { class: "cam-view", "data-sensor": sensor.id }, this.img, this.canvas);
     this.root = el(
       "section",
       { class: "cam-panel", id: `cam-${sensor.id}` },
-      el("header", {}, el("span", { class: "swatch cam-swatch", title: `${sensor.id}'s colour on the map and in 3D` }), el("b", { text: sensor.id }), el("span", { class: "muted", text: ` ${sensor.name}` }), this.status),
+      el("header", {}, el("span", { class: "swatch cam-swatch", title: `${sensor.id}'s colour on the map and in 3D` }), el("b", { text: sensor.id }), el("span", { class: "muted", text: ` ${sensor.name}` }), this.pose, this.status),
       this.wrap,
     );
     this.click = null; // {u, v, result}
@@ -88,6 +89,23 @@ export class CameraPanel {
     this.wrap.style.aspectRatio = `${sensor.width_px} / ${sensor.height_px}`;
     new ResizeObserver(() => this.resize()).observe(this.wrap);
     this.lastDraw = null;
+    this.setPose(sensor.pose || sensor);
+  }
+
+  /**
+   * Show a pose: pan, tilt (degrees) and zoom as the horizontal field of view. `pose` is a
+   * `sensor_pose` message, the sensor's `pose` or the sensor itself (its fixed pan and
+   * tilt); an hfov of null is the calibrated lens's (from fx, the intrinsics).
+   */
+  setPose(pose) {
+    const fx = this.sensor.intrinsics?.fx;
+    const lens = fx ? (2 * Math.atan(this.sensor.width_px / 2 / fx) * 180) / Math.PI : null;
+    const hfov = pose.hfov_deg ?? lens;
+    const parts = [`pan ${fmt(pose.pan_deg, 1)}°`, `tilt ${fmt(pose.tilt_deg, 1)}°`];
+    if (hfov !== null && hfov !== undefined) parts.push(`hfov ${fmt(hfov, 1)}°`);
+    this.pose.textContent = parts.join(" · ");
+    this.pose.dataset.pan = String(pose.pan_deg);
+    this.pose.title = pose.t_s !== undefined ? "pose telemetry (newest)" : "fixed pose (site.json)";
   }
 
   setImage(url) {

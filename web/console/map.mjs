@@ -195,24 +195,49 @@ export class SiteMap {
   setSensors(sensors) {
     this.sensorList = sensors;
     const pts = this.sensors.getSource();
-    const cov = this.coverage.getSource();
     pts.clear();
-    cov.clear();
+    this.coverage.getSource().clear();
+    this.coverageOf = new Map(); // sensor id -> [footprint polygon, wedge]
     for (const s of sensors) {
       const p = new ol.Feature(new ol.geom.Point([s.position_enu[0], s.position_enu[1]]));
       p.set("sensor", s.id);
       p.set("name", s.name);
       pts.addFeature(p);
-      const ring = (s.footprint?.enu || []).map((q) => [q[0], q[1]]);
-      if (ring.length >= 3) {
-        ring.push(ring[0]);
-        const poly = new ol.Feature(new ol.geom.Polygon([ring]));
-        poly.set("sensor", s.id);
-        cov.addFeature(poly);
-        const ray = new ol.Feature(new ol.geom.LineString([[s.position_enu[0], s.position_enu[1]], ring[0]]));
-        ray.set("sensor", s.id);
-      }
+      this.setFootprint(s.id, [s.position_enu[0], s.position_enu[1]], s.footprint);
     }
+  }
+
+  /**
+   * Draw sensor `id`'s ground footprint (`footprint.enu`: border points, clockwise from
+   * the image's top-left corner) and its field-of-view wedge: the lines from the camera
+   * at `xy` to the far corners of the footprint (the top edge's ends). Replaces the old.
+   */
+  setFootprint(id, xy, footprint) {
+    const cov = this.coverage.getSource();
+    for (const f of this.coverageOf.get(id) || []) cov.removeFeature(f);
+    const ring = (footprint?.enu || []).map((q) => [q[0], q[1]]);
+    const feats = [];
+    if (ring.length >= 3) {
+      const corner = Math.floor((footprint.n_rays === ring.length ? footprint.n_rays : ring.length) / 4);
+      const wedge = new ol.Feature(new ol.geom.LineString([ring[0], xy, ring[corner]]));
+      wedge.set("sensor", id);
+      wedge.set("kind", "wedge");
+      ring.push(ring[0]);
+      const poly = new ol.Feature(new ol.geom.Polygon([ring]));
+      poly.set("sensor", id);
+      poly.set("kind", "footprint");
+      feats.push(poly, wedge);
+    }
+    cov.addFeatures(feats);
+    this.coverageOf.set(id, feats);
+  }
+
+  /** A `sensor_pose` message: the sensor's footprint and wedge move to the new pose's. */
+  setSensorPose(msg) {
+    const s = (this.sensorList || []).find((x) => x.id === msg.sensor);
+    if (!s || !msg.footprint) return;
+    s.footprint = msg.footprint;
+    this.setFootprint(s.id, [s.position_enu[0], s.position_enu[1]], msg.footprint);
   }
 
   // ------------------------------------------------------------------ dynamic layers
@@ -359,6 +384,7 @@ export class SiteMap {
 
   coverageStyle(f) {
     const c = this.sensorColour(f.get("sensor"));
+    if (f.get("kind") === "wedge") return new ol.style.Style({ stroke: stroke(withAlpha(c, 0.8), 1, [2, 4]) });
     return new ol.style.Style({
       fill: new ol.style.Fill({ color: withAlpha(c, 0.14) }),
       stroke: stroke(withAlpha(c, 0.9), 1.5, [6, 4]),

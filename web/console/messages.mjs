@@ -1,5 +1,7 @@
 // What the live stream's messages do to the page: fixes, track updates, events and sensor
-// status go into the store (or the camera panels); a reset reloads the tracks.
+// status go into the store (or the camera panels); a sensor's new pose moves its footprint
+// and field-of-view wedge on the map and its panel's pan/tilt/zoom; a reset reloads the
+// tracks.
 
 import * as api from "./api.mjs";
 import { applyPrediction, isPrediction, KIND, normEvent } from "./events.mjs";
@@ -17,6 +19,11 @@ export function onMessage(msg) {
     else if (msg.kind !== KIND.INGEST) store.applyEvent(normEvent(msg));
   }
   else if (msg.type === "marker") onMarkerMessage(msg); // markers.mjs
+  else if (msg.type === "sensor_pose") {
+    store.sensorPose.set(msg.sensor, msg);
+    ui.map?.setSensorPose(msg); // map.mjs: footprint and wedge at the new pose
+    ui.cams?.get(msg.sensor)?.setPose(msg); // cameras.mjs: pan / tilt / hfov readout
+  }
   else if (msg.type === "sensor_status") {
     store.sensorStatus.set(msg.sensor, msg);
     const p = ui.cams.get(msg.sensor);

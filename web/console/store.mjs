@@ -76,6 +76,7 @@ export class Store {
     this.fixes = new Map(); // sensor -> [fix, ...] (newest last)
     this.events = []; // newest last
     this.sensorStatus = new Map();
+    this.sensorPose = new Map(); // sensor -> its newest sensor_pose message
     this.detToTrack = new Map();
     this.tMin = null;
     this.tMax = null;
@@ -87,6 +88,7 @@ export class Store {
     this.fixes.clear();
     this.events = [];
     this.sensorStatus.clear();
+    this.sensorPose.clear();
     this.detToTrack.clear();
     this.tMin = null;
     this.tMax = null;

@@ -1,0 +1,100 @@
+"""Viewing rays of pixels seen at poses that change from pixel to pixel (a moving head).
+
+A fixed camera's rays share one rotation and one optical centre
+(:meth:`Geolocator.pixel_rays <demtrack.core.geolocation.geolocate.Geolocator.pixel_rays>`).
+A PTZ head's detections are each taken at their own pose: a :class:`PosedView` holds
+pixels of one lens (one zoom) with a rotation ``R_world_cam`` and an optical centre per
+pixel. Its rays are made in the camera frame once for the whole view (one undistortion,
+the same perturbation arithmetic as the fixed path) and each is turned into the site
+frame by its own rotation, so a batch of posed detections still takes one ray cast with
+the fixed ones (:meth:`~demtrack.core.geolocation.geolocate.Geolocator.locate_ray_parts`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..camera.pinhole import Intrinsics
+from ..errors import CameraError
+from .geolocate import _perturbations_from_unit, _pixels
+
+__all__ = ["PosedView", "posed_view_rays"]
+
+
+@dataclass(frozen=True, eq=False)
+class PosedView:
+    """Pixels of one lens, each seen at its own pose.
+
+    Parameters
+    ----------
+    intrinsics : Intrinsics
+        The lens (at this view's zoom).
+    u, v : ndarray, shape (k,)
+        Pixel columns and rows ((0, 0) the centre of the top-left pixel).
+    R_world_cam : ndarray, shape (k, 3, 3)
+        Per pixel, the rotation of camera-frame (OpenCV) vectors into the site frame.
+    position_enu : ndarray, shape (k, 3)
+        Per pixel, the optical centre (site frame, m).
+    """
+
+    intrinsics: Intrinsics
+    u: np.ndarray
+    v: np.ndarray
+    R_world_cam: np.ndarray  # noqa: N815 - frame names follow the project's convention
+    position_enu: np.ndarray
+
+    def __post_init__(self) -> None:
+        k = len(np.atleast_1d(self.u))
+        rot = np.asarray(self.R_world_cam, dtype=np.float64)
+        pos = np.asarray(self.position_enu, dtype=np.float64)
+        if rot.shape != (k, 3, 3) or pos.shape != (k, 3):
+            raise CameraError(
+                f"a posed view of {k} pixels needs R_world_cam (k, 3, 3) and position_enu "
+                f"(k, 3); got {rot.shape} and {pos.shape}"
+            )
+        if not (np.isfinite(rot).all() and np.isfinite(pos).all()):
+            raise CameraError("a posed view's rotations and positions must be finite")
+        object.__setattr__(self, "R_world_cam", rot)
+        object.__setattr__(self, "position_enu", pos)
+
+
+def posed_view_rays(
+    view: PosedView, sigma_px: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Rays of a posed view and their pixel perturbations, site frame.
+
+    Parameters
+    ----------
+    view : PosedView
+    sigma_px : float
+        1-sigma pixel error, for the perturbation angles.
+
+    Returns
+    -------
+    origins, directions : ndarray, shape (k, 3)
+        Optical centres (m) and unit ray directions.
+    perturb_axes : ndarray, shape (k, 2, 3)
+        Unit directions in which each ray tips as ``u`` and as ``v`` grow.
+    perturb_sigmas : ndarray, shape (k, 2)
+        The angles (rad) those tips take for ``sigma_px``.
+
+    Raises
+    ------
+    CameraError
+        If a pixel lies outside the image.
+    """
+    u, v = _pixels(view, view.u, view.v)
+    intr = view.intrinsics
+    xn, yn = intr.undistort(u, v)
+    ray = np.empty((len(xn), 3))
+    ray[:, 0], ray[:, 1], ray[:, 2] = xn, yn, 1.0
+    norm = np.linalg.norm(ray, axis=-1, keepdims=True)
+    unit = ray / norm
+    rot = view.R_world_cam
+    directions = np.einsum("kij,kj->ki", rot, unit)
+    # The perturbations in the camera frame (identity rotation), then each turned.
+    axes_cam, sig = _perturbations_from_unit(intr, xn, yn, unit, norm, np.eye(3), sigma_px)
+    axes = np.einsum("kij,kaj->kai", rot, axes_cam)
+    return view.position_enu.copy(), directions, axes, sig

@@ -1,0 +1,163 @@
+"""``demtrack evaluate-detections``: the scoring's oracles, and the detector end to end."""
+
+from __future__ import annotations
+
+import itertools
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from demtrack.cli import main
+from demtrack.core.site.folder import load_site
+from demtrack.samplesite.video_eval import (
+    DetectionScores,
+    iou_matrix,
+    match_boxes,
+    score_detections,
+    truth_detections,
+)
+from demtrack.samplesite.video_file import read_video_truth
+
+START = "2026-12-01T14:30:00Z"
+
+
+def run(capsys, *argv):
+    status = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+@pytest.fixture(scope="module")
+def walk(sample_site_dir, tmp_path_factory):
+    """Twenty seconds of the pedestrians from cam1, with the lead-in."""
+    out = tmp_path_factory.mktemp("walk") / "walk.mp4"
+    status = main(
+        [
+            "sample-video", "--site", str(sample_site_dir), "--scenario", "pedestrians",
+            "--sensor", "cam1", "-o", str(out), "--start", START, "--t-to", "15",
+        ]
+    )  # fmt: skip
+    assert status == 0
+    return out
+
+
+def test_iou_matrix_analytic():
+    a = np.array([[0, 0, 10, 10]], dtype=float)
+    b = np.array([[5, 0, 15, 10], [0, 0, 10, 10], [20, 20, 30, 30]], dtype=float)
+    np.testing.assert_allclose(iou_matrix(a, b), [[50 / 150, 1.0, 0.0]])
+
+
+def _best_assignment(iou: np.ndarray) -> float:
+    """The largest IoU sum of a one-to-one matching, by trying every one."""
+    n, m = iou.shape
+    if n > m:
+        return _best_assignment(iou.T)
+    return max(
+        sum(iou[i, j] for i, j in enumerate(cols)) for cols in itertools.permutations(range(m), n)
+    )
+
+
+def test_matching_is_the_best_assignment():
+    """Hungarian against every permutation (brute force) on random boxes."""
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        n, m = (int(k) for k in rng.integers(1, 5, 2))
+        xy = rng.uniform(0, 30, (n + m, 2))
+        wh = rng.uniform(5, 15, (n + m, 2))
+        boxes = np.hstack([xy, xy + wh])
+        dets, truths = boxes[:n], boxes[n:]
+        pairs = match_boxes(dets, truths, min_iou=0.0)
+        best = _best_assignment(iou_matrix(dets, truths))
+        assert sum(p[2] for p in pairs) == pytest.approx(best)
+        assert all(p[2] >= 0.5 for p in match_boxes(dets, truths))
+
+
+def test_true_boxes_score_perfectly_and_shifts_score_as_computed(walk, sample_site_dir):
+    site = load_site(sample_site_dir)
+    truth = read_video_truth(walk.with_name("walk.truth.jsonl"))
+    dets = truth_detections(truth)
+    assert len(dets) > 200
+    s = score_detections(site, dets, truth)
+    assert (s.precision, s.recall, s.mean_iou, s.class_accuracy) == (1.0, 1.0, 1.0, 1.0)
+    assert s.foot_px.max() == 0.0 and np.nanmax(s.foot_m) == 0.0
+    # Every box moved right by a quarter of its width: IoU (w - dx) / (w + dx) = 0.6.
+    shifted = [
+        replace(d, bbox=(d.bbox[0] + dw, d.bbox[1], d.bbox[2] + dw, d.bbox[3]))
+        for d in dets
+        for dw in [(d.bbox[2] - d.bbox[0]) / 4]
+    ]
+    s = score_detections(site, shifted, truth)
+    assert s.recall == 1.0 and s.mean_iou == pytest.approx(0.6)
+    widths = np.array([d.bbox[2] - d.bbox[0] for d in dets])
+    assert np.sort(s.foot_px) == pytest.approx(np.sort(widths / 4))
+    assert 0.0 < np.nanmedian(s.foot_m) < 1.0  # a pixel or two is decimetres on the ground
+    # Wrong classes, then boxes too far off (IoU 1/3), then every detection twice.
+    s = score_detections(site, [replace(d, cls="vehicle") for d in dets], truth)
+    assert s.class_accuracy == 0.0 and s.recall == 1.0
+    half = [
+        replace(d, bbox=(d.bbox[0] + dw, d.bbox[1], d.bbox[2] + dw, d.bbox[3]))
+        for d in dets
+        for dw in [(d.bbox[2] - d.bbox[0]) / 2]
+    ]
+    s = score_detections(site, half, truth)
+    assert s.recall == 0.0 and s.precision == 0.0
+    s = score_detections(site, dets + dets, truth)
+    assert s.recall == 1.0 and s.precision == pytest.approx(0.5)
+    pooled = DetectionScores.pooled([s, s])
+    assert pooled.n_truth == 2 * s.n_truth and pooled.precision == s.precision
+
+
+def test_mistakes_are_one_line(capsys, sample_site_dir, walk, tmp_path):
+    base = ["evaluate-detections", "--site", sample_site_dir, "--scenario", "pedestrians"]
+    status, _, err = run(capsys, *base, "--sensor", "cam1", "--sensor", "cam2", "--video", walk)
+    assert status == 2 and "one --video per --sensor" in err
+    status, _, err = run(capsys, *base, "--sensor", "cam2", "--video", walk)
+    assert status == 2 and "is pedestrians from cam1, not pedestrians from cam2" in err
+    status, _, err = run(capsys, *base, "--sensor", "cam1", "--video", tmp_path / "none.mp4")
+    assert status == 2 and "no such file" in err
+    lone = tmp_path / "lone.mp4"
+    lone.write_bytes(walk.read_bytes())
+    status, _, err = run(capsys, *base, "--sensor", "cam1", "--video", lone)
+    assert status == 2 and "lone.truth.jsonl" in err and len(err.strip().splitlines()) == 1
+
+
+def test_detector_end_to_end_on_a_clip(capsys, sample_site_dir, walk):
+    """The VSAM detector on twenty seconds of walkers: the bar on precision and recall."""
+    status, out, _ = run(
+        capsys, "evaluate-detections", "--site", sample_site_dir, "--scenario", "pedestrians",
+        "--sensor", "cam1", "--video", walk, "--json",
+    )  # fmt: skip
+    assert status == 0
+    doc = json.loads(out)
+    (det,) = doc["detection"]
+    assert det["truth_boxes"] > 200
+    assert det["precision"] >= 0.9 and det["recall"] >= 0.9
+    assert {r["method"] for r in doc["tracking"]} >= {"kalman", "multi-hypothesis-road"}
+
+
+def test_tracking_columns_agree_when_the_detector_is_perfect(
+    capsys, monkeypatch, sample_site_dir, walk
+):
+    """A stand-in detector returning the true boxes: both tracking columns are the same."""
+    from demtrack.commands import evaluate_detections
+
+    def perfect(site, sensor, video, detector):
+        return truth_detections(read_video_truth(video.with_name("walk.truth.jsonl"))), 1.0
+
+    monkeypatch.setattr(evaluate_detections, "_detect", perfect)
+    argv = [
+        "evaluate-detections", "--site", sample_site_dir, "--scenario", "pedestrians",
+        "--sensor", "cam1", "--video", walk,
+    ]  # fmt: skip
+    status, out, _ = run(capsys, *argv, "--json")
+    assert status == 0
+    doc = json.loads(out)
+    assert doc["detection"][0]["precision"] == 1.0 and doc["bar_failures"] == []
+    for row in doc["tracking"]:
+        assert row["video"] == row["boxes"]
+    kalman = next(r for r in doc["tracking"] if r["method"] == "kalman")
+    assert kalman["boxes"]["rmse_m"] < 1.0 and kalman["boxes"]["tracks"] >= 3
+    status, out, _ = run(capsys, *argv)
+    assert status == 0 and "| cam1 | " in out and "meets the bar" in out
