@@ -138,7 +138,8 @@ class VsamDetector:
         self._close = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (7, 7))
         self._mu: np.ndarray | None = None
         self._var: np.ndarray | None = None
-        self._prev: list[np.ndarray] = []  # I_{n-1}, I_{n-2}
+        self._prev: list[np.ndarray] = []  # I_{n-1}, I_{n-2} (uint8)
+        self._thr: tuple[np.ndarray, np.ndarray] | None = None
         self._still = np.zeros(self.work_size[::-1], np.uint16)  # frames fg without motion
         self._kept: list[tuple[float, float, float, float]] = []
         self._last_motion: list[int] = []  # frame of each kept box's last motion
@@ -153,31 +154,47 @@ class VsamDetector:
             raise VideoError(f"frame is {g.shape[1]}x{g.shape[0]}, detector expects {self.size}")
         if self.scale > 1:
             g = cv2.resize(g, self.work_size, interpolation=cv2.INTER_AREA)
-        return g.astype(np.float32)
+        return np.ascontiguousarray(g, dtype=np.uint8)
+
+    def _thresholds(self) -> tuple[np.ndarray, np.ndarray]:
+        """``T = max(k sigma, min_diff)`` as float32, and as uint8 ``floor(T)``.
+
+        The uint8 form serves the uint8 frame differences (an integer difference exceeds
+        ``T`` exactly when it exceeds ``floor(T)``). Refreshed every 4 frames: the
+        variance moves slowly.
+        """
+        if (self._thr is None or self.n_frames % 4 == 0) and self._var is not None:
+            thr = cv2.max(cv2.multiply(cv2.sqrt(self._var), self.k), self.min_diff)
+            thr8 = np.floor(np.minimum(thr, 255.0)).astype(np.uint8)
+            self._thr = (thr, thr8)
+        if self._thr is None:
+            raise VideoError("no background model yet")
+        return self._thr
 
     def detect(self, frame: Frame) -> list[Blob]:
         """The moving blobs of ``frame`` (none for the first two frames: warm-up)."""
-        img = self._prepare(frame.image)
+        g8 = self._prepare(frame.image)
+        img = g8.astype(np.float32)
         self.n_frames += 1
         if self._mu is None or self._var is None:
             self._mu = img.copy()
             self._var = np.full_like(img, (self.min_diff / self.k) ** 2)
-            self._prev = [img]
+            self._prev = [g8]
             return []
-        mu, var = self._mu, self._var
-        thr = cv2.max(cv2.multiply(cv2.sqrt(var), self.k), self.min_diff)
+        mu = self._mu
+        thr, thr8 = self._thresholds()
         diff_bg = cv2.absdiff(img, mu)
         fg = cv2.compare(diff_bg, thr, cv2.CMP_GT)
-        if len(self._prev) == 2:
-            m1 = cv2.compare(cv2.absdiff(img, self._prev[0]), thr, cv2.CMP_GT)
-            m2 = cv2.compare(cv2.absdiff(img, self._prev[1]), thr, cv2.CMP_GT)
+        if len(self._prev) == 2:  # three-frame differencing on the uint8 frames
+            m1 = cv2.compare(cv2.absdiff(g8, self._prev[0]), thr8, cv2.CMP_GT)
+            m2 = cv2.compare(cv2.absdiff(g8, self._prev[1]), thr8, cv2.CMP_GT)
             moving = cv2.bitwise_and(m1, m2)
         else:
             moving = np.zeros_like(fg)
         if self._keep_mask is not None:
             fg = cv2.bitwise_and(fg, self._keep_mask)
             moving = cv2.bitwise_and(moving, self._keep_mask)
-        self._prev = [img, self._prev[0]]
+        self._prev = [g8, self._prev[0]]
         self._update(img, diff_bg, fg, moving)
         if self.n_frames < 3:
             return []
