@@ -96,7 +96,12 @@ def _run(args: argparse.Namespace) -> int:
         )
     from demtrack.core.site.folder import load_site
     from demtrack.samplesite.scenarios import make_scenario
-    from demtrack.samplesite.video_eval import DetectionScores, score_detections, truth_detections
+    from demtrack.samplesite.video_eval import (
+        DetectionScores,
+        score_detections,
+        scored_from,
+        truth_detections,
+    )
     from demtrack.samplesite.video_file import read_video_truth, truth_path_for
 
     truths_by_video = []
@@ -115,8 +120,9 @@ def _run(args: argparse.Namespace) -> int:
     for sensor, video, vt in zip(sensors, videos, truths_by_video, strict=True):
         dets, seconds = _detect(site, sensor, video, args.detector)
         speed.append((sensor, len(vt.frames) / seconds if seconds > 0 else math.inf))
-        scores.append(score_detections(site, dets, vt))
-        video_dets += dets
+        scores.append(score_detections(site, dets, vt, score_from_s=args.score_from))
+        t_scored = scored_from(vt, args.score_from)
+        video_dets += [d for d in dets if d.t_s >= t_scored]
         box_dets += truth_detections(vt)
     start_s = truths_by_video[0].start_s
     sc = make_scenario(site, args.scenario)
@@ -130,6 +136,7 @@ def _run(args: argparse.Namespace) -> int:
     doc = {
         "scenario": args.scenario,
         "detector": args.detector,
+        "scored_from_s": args.score_from,
         "detection": per_sensor + ([pooled] if len(scores) > 1 else []),
         "detector_frames_per_s": {s: round(f, 1) for s, f in speed},
         "tracking": rows,
@@ -194,6 +201,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--detector", choices=("vsam", "mog2", "knn"), default="vsam", help="default vsam"
+    )
+    p.add_argument(
+        "--score-from",
+        type=float,
+        metavar="S",
+        help="score (and track) from this scenario time (s; default: the first motion, after"
+        " the video's lead-in in which the detector learns the scene)",
     )
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(func=_run)

@@ -6,6 +6,9 @@ a true positive; an unmatched counted box a miss; an unmatched detection a false
 unless at least half of it lies on a box that is in view but not counted (mostly hidden
 or cut by the border): that one is neither (an "ignore region", as MOT benchmarks do).
 A detection whose time is more than half a frame from every frame counts as false.
+Frames before ``score_from_s`` (default: the scenario's first motion, after the video's
+lead-in, which is the detector's time to learn the scene) are not scored at all, as the
+change-detection benchmarks leave out their first frames (CDnet's temporal ROI).
 
 The foot pixel is a box's bottom centre (the paper's); its error on the ground is the
 horizontal distance between the site geolocator's first hits of the detected and the
@@ -14,6 +17,7 @@ true foot pixels (the calibrated cameras, as the tracker sees them).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -32,6 +36,7 @@ __all__ = [
     "iou_matrix",
     "match_boxes",
     "score_detections",
+    "scored_from",
     "truth_detections",
 ]
 
@@ -169,12 +174,32 @@ def _foot(box: Sequence[float]) -> tuple[float, float]:
     return (box[0] + box[2]) / 2.0, box[3]
 
 
+def scored_from(truth: VideoTruth, score_from_s: float | None = None) -> float:
+    """UNIX time of the first scored frame.
+
+    ``score_from_s`` scenario seconds; by default the scenario's first motion (``-inf``
+    for a truth file without it).
+    """
+    if score_from_s is None:
+        score_from_s = truth.header.get("t_first_motion_s", -math.inf)
+    return truth.start_s + float(score_from_s) - 1e-6
+
+
 def score_detections(
-    site: Site, detections: Sequence[Detection], truth: VideoTruth, min_iou: float = MIN_IOU
+    site: Site,
+    detections: Sequence[Detection],
+    truth: VideoTruth,
+    min_iou: float = MIN_IOU,
+    score_from_s: float | None = None,
 ) -> DetectionScores:
-    """Score one sensor's detections against its video's true boxes (module docstring)."""
+    """Score one sensor's detections against its video's true boxes (module docstring).
+
+    ``score_from_s`` : scenario seconds of the first scored frame (:func:`scored_from`).
+    """
     sensor = truth.sensor
-    frames = truth.frames
+    t_scored = scored_from(truth, score_from_s)
+    frames = [f for f in truth.frames if f["t_s"] >= t_scored]
+    detections = [d for d in detections if d.t_s >= t_scored - 0.5 / truth.header["rate_hz"]]
     t_frames = np.array([f["t_s"] for f in frames], dtype=np.float64)
     half = 0.5 / float(truth.header["rate_hz"])
     per_frame: dict[int, list[Detection]] = {}

@@ -11,6 +11,7 @@ import pytest
 
 from demtrack.cli import main
 from demtrack.core.site.folder import load_site
+from demtrack.core.tracking.types import Detection
 from demtrack.samplesite.video_eval import (
     DetectionScores,
     iou_matrix,
@@ -31,7 +32,7 @@ def run(capsys, *argv):
 
 @pytest.fixture(scope="module")
 def walk(sample_site_dir, tmp_path_factory):
-    """Twenty seconds of the pedestrians from cam1, with the lead-in."""
+    """Fifteen seconds of the pedestrians from cam1, after the 15 s lead-in."""
     out = tmp_path_factory.mktemp("walk") / "walk.mp4"
     status = main(
         [
@@ -105,6 +106,13 @@ def test_true_boxes_score_perfectly_and_shifts_score_as_computed(walk, sample_si
     assert s.recall == 0.0 and s.precision == 0.0
     s = score_detections(site, dets + dets, truth)
     assert s.recall == 1.0 and s.precision == pytest.approx(0.5)
+    # Clutter in the lead-in (the detector's learning time) is not scored unless asked.
+    t_lead = truth.frames[3]["t_s"]
+    clutter = [Detection(t_lead, "cam1", (10.0, 10.0, 30.0, 20.0), "vehicle", 0.5)]
+    assert truth.header["t_first_motion_s"] == 0.0 and truth.header["t_from_s"] == -15.0
+    assert score_detections(site, clutter + dets, truth).precision == 1.0
+    s = score_detections(site, clutter + dets, truth, score_from_s=-15.0)
+    assert s.n_detections == len(dets) + 1 and s.recall == 1.0
     pooled = DetectionScores.pooled([s, s])
     assert pooled.n_truth == 2 * s.n_truth and pooled.precision == s.precision
 
