@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from demtrack.cli import main
+from demtrack.core.io.detections import write_detections_jsonl
 from demtrack.core.site.folder import load_site
 from demtrack.core.tracking.types import Detection
 from demtrack.samplesite.video_eval import (
@@ -145,23 +146,22 @@ def test_detector_end_to_end_on_a_clip(capsys, sample_site_dir, walk):
     assert {r["method"] for r in doc["tracking"]} >= {"kalman", "multi-hypothesis-road"}
 
 
-def test_tracking_columns_agree_when_the_detector_is_perfect(
-    capsys, monkeypatch, sample_site_dir, walk
+def test_tracking_columns_agree_when_the_detections_are_the_truth(
+    capsys, sample_site_dir, walk, tmp_path
 ):
-    """A stand-in detector returning the true boxes: both tracking columns are the same."""
-    from demtrack.commands import evaluate_detections
-
-    def perfect(site, sensor, video, detector):
-        return truth_detections(read_video_truth(video.with_name("walk.truth.jsonl"))), 1.0
-
-    monkeypatch.setattr(evaluate_detections, "_detect", perfect)
+    """Saved detections that are the true boxes: both tracking columns are the same."""
+    saved = tmp_path / "perfect.jsonl"
+    write_detections_jsonl(
+        saved, truth_detections(read_video_truth(walk.with_name("walk.truth.jsonl")))
+    )
     argv = [
         "evaluate-detections", "--site", sample_site_dir, "--scenario", "pedestrians",
-        "--sensor", "cam1", "--video", walk,
+        "--sensor", "cam1", "--video", walk, "--detections", saved,
     ]  # fmt: skip
     status, out, _ = run(capsys, *argv, "--json")
     assert status == 0
     doc = json.loads(out)
+    assert doc["detector"] == "saved detections"
     assert doc["detection"][0]["precision"] == 1.0 and doc["bar_failures"] == []
     for row in doc["tracking"]:
         assert row["video"] == row["boxes"]
@@ -169,3 +169,5 @@ def test_tracking_columns_agree_when_the_detector_is_perfect(
     assert kalman["boxes"]["rmse_m"] < 1.0 and kalman["boxes"]["tracks"] >= 3
     status, out, _ = run(capsys, *argv)
     assert status == 0 and "| cam1 | " in out and "meets the bar" in out
+    status, _, err = run(capsys, *argv, "--sensor", "cam2", "--video", walk)
+    assert status == 2 and "one --detections per --sensor" in err
