@@ -194,6 +194,13 @@ def _run(args: argparse.Namespace) -> int:
                 f"{m['tracks']} ({m['false_tracks']})",
             ]
         print(f"| {r['method']} | " + " | ".join(cells) + " |")
+    print(
+        "\nrecall by true box height: "
+        + "; ".join(
+            f"{s['sensor']} " + ", ".join(f"{k} {v:.2f}" for k, v in s["recall_by_height"].items())
+            for s in doc["detection"]
+        )
+    )
     verdict = "meets the bar" if not fails else "misses the bar: " + "; ".join(fails)
     print(f"\nbest method from video: {best['method']}; {verdict}")
     return 0
