@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 
 from demtrack.cli import main
+from demtrack.core.io.detections import write_detections_jsonl
 from demtrack.core.site.folder import load_site
+from demtrack.core.tracking.types import Detection
 from demtrack.samplesite.video_eval import (
     DetectionScores,
     iou_matrix,
@@ -31,7 +33,7 @@ def run(capsys, *argv):
 
 @pytest.fixture(scope="module")
 def walk(sample_site_dir, tmp_path_factory):
-    """Twenty seconds of the pedestrians from cam1, with the lead-in."""
+    """Fifteen seconds of the pedestrians from cam1, after the 15 s lead-in."""
     out = tmp_path_factory.mktemp("walk") / "walk.mp4"
     status = main(
         [
@@ -105,6 +107,13 @@ def test_true_boxes_score_perfectly_and_shifts_score_as_computed(walk, sample_si
     assert s.recall == 0.0 and s.precision == 0.0
     s = score_detections(site, dets + dets, truth)
     assert s.recall == 1.0 and s.precision == pytest.approx(0.5)
+    # Clutter in the lead-in (the detector's learning time) is not scored unless asked.
+    t_lead = truth.frames[3]["t_s"]
+    clutter = [Detection(t_lead, "cam1", (10.0, 10.0, 30.0, 20.0), "vehicle", 0.5)]
+    assert truth.header["t_first_motion_s"] == 0.0 and truth.header["t_from_s"] == -15.0
+    assert score_detections(site, clutter + dets, truth).precision == 1.0
+    s = score_detections(site, clutter + dets, truth, score_from_s=-15.0)
+    assert s.n_detections == len(dets) + 1 and s.recall == 1.0
     pooled = DetectionScores.pooled([s, s])
     assert pooled.n_truth == 2 * s.n_truth and pooled.precision == s.precision
 
@@ -137,23 +146,22 @@ def test_detector_end_to_end_on_a_clip(capsys, sample_site_dir, walk):
     assert {r["method"] for r in doc["tracking"]} >= {"kalman", "multi-hypothesis-road"}
 
 
-def test_tracking_columns_agree_when_the_detector_is_perfect(
-    capsys, monkeypatch, sample_site_dir, walk
+def test_tracking_columns_agree_when_the_detections_are_the_truth(
+    capsys, sample_site_dir, walk, tmp_path
 ):
-    """A stand-in detector returning the true boxes: both tracking columns are the same."""
-    from demtrack.commands import evaluate_detections
-
-    def perfect(site, sensor, video, detector):
-        return truth_detections(read_video_truth(video.with_name("walk.truth.jsonl"))), 1.0
-
-    monkeypatch.setattr(evaluate_detections, "_detect", perfect)
+    """Saved detections that are the true boxes: both tracking columns are the same."""
+    saved = tmp_path / "perfect.jsonl"
+    write_detections_jsonl(
+        saved, truth_detections(read_video_truth(walk.with_name("walk.truth.jsonl")))
+    )
     argv = [
         "evaluate-detections", "--site", sample_site_dir, "--scenario", "pedestrians",
-        "--sensor", "cam1", "--video", walk,
+        "--sensor", "cam1", "--video", walk, "--detections", saved,
     ]  # fmt: skip
     status, out, _ = run(capsys, *argv, "--json")
     assert status == 0
     doc = json.loads(out)
+    assert doc["detector"] == "saved detections"
     assert doc["detection"][0]["precision"] == 1.0 and doc["bar_failures"] == []
     for row in doc["tracking"]:
         assert row["video"] == row["boxes"]
@@ -161,3 +169,5 @@ def test_tracking_columns_agree_when_the_detector_is_perfect(
     assert kalman["boxes"]["rmse_m"] < 1.0 and kalman["boxes"]["tracks"] >= 3
     status, out, _ = run(capsys, *argv)
     assert status == 0 and "| cam1 | " in out and "meets the bar" in out
+    status, _, err = run(capsys, *argv, "--sensor", "cam2", "--video", walk)
+    assert status == 2 and "one --detections per --sensor" in err
