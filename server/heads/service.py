@@ -3,8 +3,8 @@
 :func:`start_heads` is called in the app's lifespan once the pipeline has replayed the
 store (so a restored ``follow`` finds its track): one adapter per active sensor
 (:mod:`.config`), the journal beside the database, the pose feed into
-``state.poses.accept`` (the pose ingest; until the server has one, poses are only kept
-as each head's last status).
+``state.poses.accept`` (the pose ingest: stored, streamed as ``sensor_pose``, used to
+geolocate the detections of that moment).
 """
 
 from __future__ import annotations
@@ -13,6 +13,8 @@ import logging
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
+
+from demtrack.core.camera.pose_series import PoseSample
 
 from .adapter import HeadStatus
 from .config import active_head_configs, build_adapter
@@ -30,14 +32,20 @@ def journal_path(db_path: Path) -> Path:
 
 
 def pose_feed(state: Any) -> PoseFeed | None:
-    """``feed(sensor_id, statuses)`` into ``state.poses.accept``; None without pose ingest."""
+    """``feed(sensor_id, statuses)`` into ``state.poses.accept`` (None without one)."""
     poses = getattr(state, "poses", None)
     if poses is None:
         return None
-    from demtrack.core.camera.pose_series import PoseSample  # type: ignore[import-not-found]
+    site = state.site
 
     def feed(sensor_id: str, statuses: Sequence[HeadStatus]) -> None:
-        samples = [PoseSample(s.t_s, s.pan_deg, s.tilt_deg, hfov_deg=s.hfov_deg) for s in statuses]
+        # The field of view only where the lens has a zoom table: a fixed lens is its
+        # calibration, whatever a simulated head's zoom axis says.
+        zoomed = getattr(site.sensor(sensor_id), "zoom", None) is not None
+        samples = [
+            PoseSample(s.t_s, s.pan_deg, s.tilt_deg, hfov_deg=s.hfov_deg if zoomed else None)
+            for s in statuses
+        ]
         poses.accept(sensor_id, samples)
 
     return feed
