@@ -2,8 +2,9 @@
 
 A real ``demtrack serve`` on a copy of the sample site whose cam1 and cam2 are active
 (simulated) heads (cam3, fixed, makes the track: the active cameras' detections of the
-scenario have no poses at their times, as their heads report on the wall clock); Chromium clicks the buttons and the map, and the server's
-``GET /api/sensors/{id}/head`` must show what the click asked for.
+scenario have no poses at their times, as their heads report on the wall clock);
+Chromium clicks the buttons and the map, and the server's ``GET /api/sensors/{id}/head``
+must show what the click asked for.
 """
 
 from __future__ import annotations
