@@ -106,14 +106,16 @@ class TrackMotion:
         return self.p_enu + self.v_enu * (float(t_s) - self.t_s)
 
 
-def track_motion(pipeline: Any, track_id: int, window_s: float = 1.0) -> TrackMotion | None:
+def track_motion(
+    pipeline: Any, track_id: int, window_s: float = 1.0, wait_s: float = 0.05
+) -> TrackMotion | None:
     """The pipeline's newest estimate of ``track_id``; None if unknown or busy.
 
     Velocity is the mean over the last ``window_s`` seconds of points. The pipeline's lock
-    is tried for 50 ms only: a controller tick never waits for a long ingest.
+    is tried for ``wait_s`` only (50 ms): a controller tick never waits for a long ingest.
     """
     lock = pipeline.commits.lock
-    if not lock.acquire(timeout=0.05):
+    if not lock.acquire(timeout=wait_s):
         return None
     try:
         live = {t.id: t for t in pipeline.tracker.tracks(include_ended=False)}

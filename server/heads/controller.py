@@ -213,7 +213,10 @@ class HeadController:
         """Assign a head to a live track: mode ``follow``."""
         with self._lock:
             unit = self.unit(sensor_id)
-            motion = None if self.pipeline is None else track_motion(self.pipeline, track_id)
+            # an operator's request may wait for a batch being processed (2 s at most)
+            motion = (
+                None if self.pipeline is None else track_motion(self.pipeline, track_id, wait_s=2.0)
+            )
             if motion is None or motion.ended:
                 raise NotFoundError(f"no live track {track_id} to follow")
             self._set(unit, "follow", {"track_id": int(track_id)})
