@@ -21,7 +21,7 @@ from .config import active_head_configs, build_adapter
 from .controller import HeadController, HeadUnit, PoseFeed
 from .journal import HeadJournal
 
-__all__ = ["journal_path", "pose_feed", "start_heads"]
+__all__ = ["check_heads", "journal_path", "pose_feed", "start_heads"]
 
 log = logging.getLogger("demtrack.server")
 
@@ -49,6 +49,16 @@ def pose_feed(state: Any) -> PoseFeed | None:
         poses.accept(sensor_id, samples)
 
     return feed
+
+
+def check_heads(site: Any, settings: Any) -> None:
+    """Build (without starting or connecting) every adapter: a bad entry raises one line.
+
+    Called by :func:`demtrack.server.app.check_startup`, before uvicorn runs.
+    """
+    if settings.heads != "off":
+        for config in active_head_configs(site):
+            build_adapter(site, config)
 
 
 def start_heads(state: Any) -> HeadController | None:
