@@ -11,9 +11,9 @@ real-time video", and the hybrid of the VSAM final report (Collins et al. 2000, 
   (``mu += alpha (I - mu)``, ``var += alpha ((I - mu)^2 - var)``), gives the *whole*
   object: foreground where ``|I - mu| > T``, ``T = max(k sigma, min_diff)``. Slow
   illumination drift is learnt at the background pixels.
-- **The hybrid**: a foreground component (after a 3x3 median (majority) filter and a closing) is kept when
-  it holds moving pixels, or when it overlaps a box kept in the previous frame that moved
-  within ``hold_s`` (a stopped object stays detected that long). A component not kept (a
+- **The hybrid**: a foreground component (after a 3x3 median (majority) filter and a
+  closing) is kept when it holds moving pixels, or when it overlaps a box kept in the
+  previous frame that moved within ``hold_s`` (a stopped object stays detected that long). A component not kept (a
   ghost, or an object still for longer) is learnt into the background at once; any pixel
   foreground and motionless for ``absorb_s`` is too.
 - **Restless background**: a per-pixel motion rate (the share of recent frames in which
