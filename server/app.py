@@ -45,6 +45,7 @@ from .api import (
     site,
     synopsis,
     tracks,
+    video,
     visibility,
     web,
 )
@@ -373,6 +374,7 @@ def create_app(
     # markers' routes name their own token checks
     app.include_router(markers.router, responses=error_responses(401, 404, 422, 503, 507))
     app.include_router(visibility.router, dependencies=READER, responses=read)
+    app.include_router(video.router)  # frames in and out; its routes name their token checks
     app.include_router(scene3d.router, responses=read)
     app.include_router(stream.router)
     app.include_router(web.router)
