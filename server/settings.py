@@ -129,10 +129,12 @@ class Settings(BaseSettings):
     cot_queue_size : int
         Batches of stream messages the CoT sender buffers; beyond, they are dropped
         (ingest never waits for the network).
-    heads : {"sim", "off"}
-        Pan-tilt-zoom heads of the site's active sensors: ``sim`` (the default) drives a
-        simulated head for each (an ONVIF head where ``site.json`` configures one); ``off``
-        runs none.
+    heads : {"auto", "sim", "off"}
+        Pan-tilt-zoom heads of the site's active sensors. ``auto`` (the default) drives the
+        heads ``site.json`` gives a ``head_adapter`` (ONVIF, or an explicit simulated one)
+        and leaves the others to their gateways (their poses come from the API: a simulated
+        head would invent poses for them); ``sim`` also simulates a head for every active
+        sensor without an adapter entry; ``off`` drives none.
     heads_period_s : float
         The head controller's tick (s): status polls, pose feed, follow commands.
     max_frame_bytes : int
@@ -196,7 +198,7 @@ class Settings(BaseSettings):
     cot_stale_s: float = Field(default=60.0, gt=0, le=86_400, allow_inf_nan=False)
     cot_marker_stale_s: float = Field(default=86_400.0, gt=0, le=31_536_000, allow_inf_nan=False)
     cot_queue_size: int = Field(default=1000, gt=0, le=1_000_000)
-    heads: Literal["sim", "off"] = "sim"
+    heads: Literal["auto", "sim", "off"] = "auto"
     heads_period_s: float = Field(default=0.1, gt=0, le=10, allow_inf_nan=False)
     max_frame_bytes: int = Field(default=2 * 1024 * 1024, gt=0)
     replay_video: bool = False

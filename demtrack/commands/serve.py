@@ -236,10 +236,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--heads",
-        choices=["sim", "off"],
+        choices=["auto", "sim", "off"],
         default=None,
-        help="pan-tilt-zoom heads of the site's active sensors: sim (simulated, or ONVIF where"
-        " site.json configures it) or off (default: $DEMTRACK_HEADS, else sim)",
+        help="pan-tilt-zoom heads of the site's active sensors: auto (those site.json gives a"
+        " head_adapter: ONVIF or simulated), sim (also simulate the others) or off"
+        " (default: $DEMTRACK_HEADS, else auto)",
     )
     add_live_arguments(p, replay_default=[])
     p.add_argument(

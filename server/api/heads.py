@@ -21,11 +21,11 @@ from starlette.concurrency import run_in_threadpool
 from demtrack.core.io.times import format_utc
 
 from ..heads.adapter import HeadAdapterError
-from ..heads.controller import HeadController, HeadNotActiveError
+from ..heads.controller import HeadController, HeadNotActiveError, not_driven
 from .deps import OPERATOR, READER, StateDep
 from .errors import error_responses
 
-__all__ = ["FollowIn", "HeadOut", "SlewIn", "router"]
+__all__ = ["HeadFollowIn", "HeadOut", "HeadSlewIn", "router"]
 
 router = APIRouter(tags=["heads"])
 
@@ -33,7 +33,7 @@ _Deg = Annotated[float, Field(allow_inf_nan=False, ge=-360.0, le=360.0)]
 _M = Annotated[float, Field(allow_inf_nan=False, ge=-1e7, le=1e7)]
 
 
-class SlewIn(BaseModel):
+class HeadSlewIn(BaseModel):
     """Where to point: ``pan_deg`` and ``tilt_deg`` (``hfov_deg`` optional), or a ground point."""
 
     model_config = ConfigDict(extra="forbid")
@@ -46,7 +46,7 @@ class SlewIn(BaseModel):
     u_m: _M | None = None
 
     @model_validator(mode="after")
-    def _one_form(self) -> SlewIn:
+    def _one_form(self) -> HeadSlewIn:
         angles = self.pan_deg is not None or self.tilt_deg is not None
         point = self.e_m is not None or self.n_m is not None or self.u_m is not None
         if angles == point:
@@ -58,7 +58,7 @@ class SlewIn(BaseModel):
         return self
 
 
-class FollowIn(BaseModel):
+class HeadFollowIn(BaseModel):
     """The live track a head should follow."""
 
     model_config = ConfigDict(extra="forbid")
@@ -109,11 +109,9 @@ def _out(info: dict[str, Any]) -> HeadOut:
 async def _call(
     state: Any, ctl: HeadController | None, sensor_id: str, fn: str, *args: Any
 ) -> HeadOut:
-    state.site.sensor(sensor_id)  # 404 first, whatever runs the heads
+    sensor = state.site.sensor(sensor_id)  # 404 first, whatever runs the heads
     if ctl is None:
-        raise HTTPException(
-            409, f"sensor {sensor_id} is on a fixed mount, not an active pan-tilt-zoom head"
-        )
+        raise HTTPException(409, not_driven(sensor))
     try:
         return _out(await run_in_threadpool(getattr(ctl, fn), sensor_id, *args))
     except HeadNotActiveError as exc:
@@ -155,7 +153,7 @@ async def get_head(sensor_id: str, state: StateDep, ctl: _Heads) -> HeadOut:
     responses=error_responses(401, 404, 409, 422, 502),
     summary="Point a head at a pan and tilt, or at a ground point",
 )
-async def slew(sensor_id: str, body: SlewIn, state: StateDep, ctl: _Heads) -> HeadOut:
+async def slew(sensor_id: str, body: HeadSlewIn, state: StateDep, ctl: _Heads) -> HeadOut:
     """Point the head; a ground point is checked for a clear sight line and the tilt range."""
     if body.e_m is not None and body.n_m is not None:
         return await _call(state, ctl, sensor_id, "look", body.e_m, body.n_m, body.u_m)
@@ -169,7 +167,7 @@ async def slew(sensor_id: str, body: SlewIn, state: StateDep, ctl: _Heads) -> He
     responses=error_responses(401, 404, 409, 422, 502),
     summary="Assign a head to a live track",
 )
-async def follow(sensor_id: str, body: FollowIn, state: StateDep, ctl: _Heads) -> HeadOut:
+async def follow(sensor_id: str, body: HeadFollowIn, state: StateDep, ctl: _Heads) -> HeadOut:
     """The head aims at the track's predicted position each tick (404: no such live track)."""
     return await _call(state, ctl, sensor_id, "follow", body.track_id)
 

@@ -11,9 +11,10 @@ entry says ``"active": true``. Its limits are ``"slew_limits"`` (the field names
                      "pan_range_deg": [-180, 180], "tilt_range_deg": [-90, 30],
                      "hfov_deg": [60, 3], "zoom_scale": "focal"}
 
-``{"kind": "sim"}`` (or no entry) is a simulated head starting at the sensor's stored
-pan and tilt; ``{"kind": "external"}`` is a head the server does not drive (its gateway
-posts its poses to ``POST /api/sensors/{id}/poses``), so it gets no unit. The password
+``{"kind": "sim"}`` is a simulated head starting at the sensor's stored pan and tilt (no
+entry: simulated with ``--heads sim``, else external); ``{"kind": "external"}`` is a
+head the server does not drive (its gateway posts its poses to
+``POST /api/sensors/{id}/poses``), so it gets no unit. The password
 comes from the environment variable ``password_env`` names, never from the manifest.
 ``active`` and ``slew_limits`` are the loaded :class:`~demtrack.core.site.folder.Sensor`'s;
 ``head_adapter`` is read here from the raw manifest entry.
@@ -63,8 +64,14 @@ def _entries(site: Site) -> dict[str, Mapping[str, Any]]:
     }
 
 
-def active_head_configs(site: Site) -> list[HeadConfig]:
-    """The site's active sensors, in manifest order, with their limits and adapters."""
+def active_head_configs(site: Site, heads: str = "sim") -> list[HeadConfig]:
+    """The site's driven heads, in manifest order, with their limits and adapters.
+
+    ``heads``: ``"sim"`` simulates a head for an active sensor without a ``head_adapter``
+    entry; ``"auto"`` leaves such a sensor to its gateway (external); ``"off"``: none.
+    """
+    if heads == "off":
+        return []
     out = []
     entries = _entries(site)
     for sensor in site.sensors.values():
@@ -77,7 +84,7 @@ def active_head_configs(site: Site) -> list[HeadConfig]:
             limits = SlewLimits.from_dict(raw_limits)
         except DemtrackError as exc:
             raise SiteError(f"site.json: sensor {sensor.id!r}: {exc}") from None
-        adapter = entry.get("head_adapter") or {"kind": "sim"}
+        adapter = entry.get("head_adapter") or {"kind": "sim" if heads == "sim" else "external"}
         if not isinstance(adapter, Mapping) or adapter.get("kind") not in KINDS:
             raise SiteError(
                 f"site.json: sensor {sensor.id!r}: head_adapter.kind must be one of"

@@ -44,7 +44,7 @@ from .aim import aim_pan_tilt, check_ground_point, sensor_at, track_motion
 from .handover import HandoverPlanner
 from .journal import HeadJournal
 
-__all__ = ["HeadController", "HeadNotActiveError", "HeadUnit", "PoseFeed"]
+__all__ = ["HeadController", "HeadNotActiveError", "HeadUnit", "PoseFeed", "not_driven"]
 
 log = logging.getLogger("demtrack.server")
 
@@ -58,7 +58,17 @@ TARGET_HEIGHT_M = 1.5
 
 
 class HeadNotActiveError(DemtrackError, ValueError):
-    """A command for a sensor on a fixed mount (not an active pan-tilt-zoom head)."""
+    """A command for a head the server does not drive (a fixed mount, or a gateway's)."""
+
+
+def not_driven(sensor: Sensor) -> str:
+    """Why the server does not drive this sensor's head, in one line."""
+    if getattr(sensor, "active", False):
+        return (
+            f"sensor {sensor.id}'s head is not driven by this server (no head_adapter in"
+            " site.json: its poses come from its gateway; --heads sim simulates one)"
+        )
+    return f"sensor {sensor.id} is on a fixed mount, not an active pan-tilt-zoom head"
 
 
 @dataclass(eq=False)
@@ -172,12 +182,10 @@ class HeadController:
     # ------------------------------------------------------------------ API
     def unit(self, sensor_id: str) -> HeadUnit:
         """The unit of an active sensor: 404 unknown, :class:`HeadNotActiveError` fixed."""
-        self.site.sensor(sensor_id)  # UnknownSensorError (404) for an unknown id
+        sensor = self.site.sensor(sensor_id)  # UnknownSensorError (404) for an unknown id
         unit = self.units.get(sensor_id)
         if unit is None:
-            raise HeadNotActiveError(
-                f"sensor {sensor_id} is on a fixed mount, not an active pan-tilt-zoom head"
-            )
+            raise HeadNotActiveError(not_driven(sensor))
         return unit
 
     def info(self, sensor_id: str) -> dict[str, Any]:

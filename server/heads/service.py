@@ -56,17 +56,14 @@ def check_heads(site: Any, settings: Any) -> None:
 
     Called by :func:`demtrack.server.app.check_startup`, before uvicorn runs.
     """
-    if settings.heads != "off":
-        for config in active_head_configs(site):
-            build_adapter(site, config)
+    for config in active_head_configs(site, settings.heads):
+        build_adapter(site, config)
 
 
 def start_heads(state: Any) -> HeadController | None:
-    """The started controller of the site's active heads (None: ``heads=off`` or none)."""
+    """The started controller of the site's driven heads (None: none to drive)."""
     settings = state.settings
-    if settings.heads == "off":
-        return None
-    configs = active_head_configs(state.site)
+    configs = active_head_configs(state.site, settings.heads)
     if not configs:
         return None
     units = [

@@ -34,6 +34,8 @@ def start(site, db):
             "--no-warm-up",
             "--log-level",
             "info",
+            "--heads",
+            "sim",
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,

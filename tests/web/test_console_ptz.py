@@ -46,7 +46,9 @@ def test_follow_release_and_look_here(page, sample_site_dir, tmp_path):
         for d in make_scenario(site, "vehicle-run").detections
         if d.t_s < 30.0
     ]
-    srv = Server(site_dir, tmp_path / "console.sqlite3", free_port()).start()
+    srv = Server(
+        site_dir, tmp_path / "console.sqlite3", free_port(), extra_args=("--heads", "sim")
+    ).start()
     try:
         with srv.client() as c:
             for k in range(0, len(recs), 200):
