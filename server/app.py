@@ -45,13 +45,14 @@ from .api import (
     site,
     synopsis,
     tracks,
+    video,
     visibility,
     web,
 )
 from .api.deps import READER
 from .api.errors import error_responses, install_error_handlers
 from .cot.service import start_cot_sender
-from .heads.service import start_heads
+from .heads.service import check_heads, start_heads
 from .hub import Hub
 from .ingest.pipeline import Pipeline, Publisher, pipeline_options
 from .replay import Replay, scenario_stream, start_time_after
@@ -62,6 +63,8 @@ from .state import ConsoleState
 from .store.database import Store
 from .store.markers import list_markers
 from .stream import endpoint as stream
+from .video.frames_http import frame_book
+from .video.service import check_video_source, start_video_replay
 
 __all__ = ["check_startup", "create_app"]
 
@@ -79,6 +82,8 @@ def _check(settings: Settings, scenarios: ScenarioSource | None) -> None:
                 f"cannot replay {', '.join(settings.replay)}: no scenario source was handed to"
                 " create_app (demtrack serve and demtrack demo hand the sample site's)"
             )
+        if settings.replay_video:
+            check_video_source(list(settings.replay), scenarios)
         known = list(scenarios.names)
         unknown = [name for name in settings.replay if name not in known]
         if unknown:
@@ -202,6 +207,7 @@ def check_startup(app: FastAPI) -> None:
     """
     settings: Settings = app.state.settings
     app.state.preloaded_site = load_site(settings.site)
+    check_heads(app.state.preloaded_site, settings)  # a bad head_adapter entry: one line
     path = settings.resolved_db_path
     try:
         Store(path).close()
@@ -265,7 +271,14 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     app.state.console = ConsoleState(settings, site_, store, hub, pipeline, caster)
     app.state.heads = await run_in_threadpool(start_heads, app.state.console)
     app.state.replay = (
-        _start_replay(
+        start_video_replay(
+            app.state.console,
+            app.state.scenarios,
+            frame_book(app.state),
+            getattr(app.state, "replay_after", None),
+        )
+        if settings.replay and settings.replay_video
+        else _start_replay(
             site_,
             store,
             pipeline,
@@ -373,6 +386,7 @@ def create_app(
     # markers' routes name their own token checks
     app.include_router(markers.router, responses=error_responses(401, 404, 422, 503, 507))
     app.include_router(visibility.router, dependencies=READER, responses=read)
+    app.include_router(video.router)  # frames in and out; its routes name their token checks
     app.include_router(scene3d.router, responses=read)
     app.include_router(stream.router)
     app.include_router(web.router)

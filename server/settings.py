@@ -135,6 +135,15 @@ class Settings(BaseSettings):
         runs none.
     heads_period_s : float
         The head controller's tick (s): status polls, pose feed, follow commands.
+    max_frame_bytes : int
+        Largest JPEG frame ``PUT /api/sensors/{id}/frame`` keeps (422 beyond it).
+    replay_video : bool
+        The replay's detections come from the video detector run on each camera's video
+        of the scenario (the scenario source renders or reads them, see
+        :mod:`demtrack.server.video.replay_video`), and its frames go to the frame book.
+    replay_frame_hz : float
+        Video replay: most frames per second (wall clock) put in the frame book per camera;
+        at higher replay speeds the panel skips frames, the detector does not.
     """
 
     model_config = SettingsConfigDict(
@@ -189,6 +198,9 @@ class Settings(BaseSettings):
     cot_queue_size: int = Field(default=1000, gt=0, le=1_000_000)
     heads: Literal["sim", "off"] = "sim"
     heads_period_s: float = Field(default=0.1, gt=0, le=10, allow_inf_nan=False)
+    max_frame_bytes: int = Field(default=2 * 1024 * 1024, gt=0)
+    replay_video: bool = False
+    replay_frame_hz: float = Field(default=5.0, gt=0, le=30, allow_inf_nan=False)
 
     @field_validator("replay_start_s", mode="before")
     @classmethod

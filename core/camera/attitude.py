@@ -30,25 +30,32 @@ __all__ = [
 def rotations_from_azimuth_tilt_roll(
     az_deg: np.ndarray, tilt_deg: np.ndarray, roll_deg: np.ndarray
 ) -> np.ndarray:
-    """``R_world_cam`` for each (azimuth, tilt, roll) in degrees, shape (n, 3, 3)."""
+    """``R_world_cam`` for each (azimuth, tilt, roll) in degrees, shape (n, 3, 3).
+
+    Columns: right ``cos(roll) r0 + sin(roll) d0``, down ``cos(roll) d0 - sin(roll) r0``
+    and forward ``(sin az cos t, cos az cos t, sin t)``, where ``r0 = (cos az, -sin az, 0)``
+    is the level right of the azimuth and ``d0 = forward x r0 = (sin t sin az,
+    sin t cos az, -cos t)``.
+    """
     az, tilt, roll = (
-        np.radians(np.asarray(a, dtype=np.float64)) for a in (az_deg, tilt_deg, roll_deg)
+        np.radians(np.asarray(a, dtype=np.float64).reshape(-1))
+        for a in (az_deg, tilt_deg, roll_deg)
     )
-    sa, ca, st, ct, sr, cr = (
-        np.sin(az),
-        np.cos(az),
-        np.sin(tilt),
-        np.cos(tilt),
-        np.sin(roll),
-        np.cos(roll),
-    )
-    n = len(az)
-    forward = np.stack([sa * ct, ca * ct, st], axis=-1)
-    right0 = np.stack([ca, -sa, np.zeros(n)], axis=-1)
-    down0 = np.cross(forward, right0)
-    right = cr[:, None] * right0 + sr[:, None] * down0
-    down = cr[:, None] * down0 - sr[:, None] * right0
-    return np.stack([right, down, forward], axis=-1)
+    sa, ca = np.sin(az), np.cos(az)
+    st, ct = np.sin(tilt), np.cos(tilt)
+    sr, cr = np.sin(roll), np.cos(roll)
+    out = np.empty((len(az), 3, 3))
+    d0x, d0y, d0z = st * sa, st * ca, -ct
+    out[:, 0, 0] = cr * ca + sr * d0x
+    out[:, 1, 0] = -cr * sa + sr * d0y
+    out[:, 2, 0] = sr * d0z
+    out[:, 0, 1] = cr * d0x - sr * ca
+    out[:, 1, 1] = cr * d0y + sr * sa
+    out[:, 2, 1] = cr * d0z
+    out[:, 0, 2] = sa * ct
+    out[:, 1, 2] = ca * ct
+    out[:, 2, 2] = st
+    return out
 
 
 def rotations_from_ypr(ypr_deg: np.ndarray) -> np.ndarray:

@@ -170,6 +170,9 @@ def camera_at(head: PanTiltHead, pose: PoseSample, zoom: ZoomTable | None = None
     ------
     PoseError
         For an hfov outside ``zoom``'s table.
+    CameraError
+        For a zoom at which the lens model has no inverse over the image (a zoom much
+        wider than the calibrated one, on a strongly distorted lens).
     """
     intr = head.intrinsics
     if pose.hfov_deg is not None:
@@ -232,12 +235,8 @@ class PoseBatch:
 
     def camera_rotations(self, head: PanTiltHead) -> np.ndarray:
         """``R_world_cam`` of ``head`` at each pose, shape (n, 3, 3); NaN where not ok."""
-        r = rotations_from_azimuth_tilt_roll(
-            head.mount_yaw_deg + self.pan_deg, self.tilt_deg, self.roll_deg
-        )
-        if self.has_platform:
-            r = self.platform_R_world_body @ r
-        return r
+        platform = self.platform_R_world_body if self.has_platform else None
+        return _camera_rotations(head, self.pan_deg, self.tilt_deg, self.roll_deg, platform)
 
     def positions(self, head: PanTiltHead) -> np.ndarray:
         """Optical centres (site frame, m), shape (n, 3): the head's where none is given."""
@@ -327,16 +326,22 @@ class PoseSeries:
             if len(given) > 1:
                 raise PoseError(f"pose series: {name} is given by some samples but not all")
         first = samples[0] if samples else None
+
+        def column(name: str) -> list[Any] | None:
+            return (
+                None
+                if first is None or getattr(first, name) is None
+                else [getattr(s, name) for s in samples]
+            )
+
         return cls.from_arrays(
             [s.t_s for s in samples],
             [s.pan_deg for s in samples],
             [s.tilt_deg for s in samples],
-            [s.hfov_deg for s in samples] if first and first.hfov_deg is not None else None,
+            column("hfov_deg"),
             [s.roll_deg for s in samples],
-            [s.position_enu for s in samples] if first and first.position_enu is not None else None,
-            [s.platform_ypr_deg for s in samples]
-            if first and first.platform_ypr_deg is not None
-            else None,
+            column("position_enu"),
+            column("platform_ypr_deg"),
         )
 
     @classmethod
@@ -455,7 +460,7 @@ class PoseSeries:
                 f"pose series: a new sample at {new._t[0]!r} s is not after the last one "
                 f"({self._t[-1]!r} s)"
             )
-        joined = [
+        joined: list[Any] = [
             None if a is None else np.concatenate([a, b])
             for a, b in zip(self._parts(), new._parts(), strict=True)
         ]
@@ -469,7 +474,8 @@ class PoseSeries:
         k = max(int(np.searchsorted(self._t, float(t_s), side="right")) - 1, 0)
         if k == 0:
             return self
-        return PoseSeries(*(None if a is None else a[k:].copy() for a in self._parts()))
+        parts: list[Any] = [None if a is None else a[k:].copy() for a in self._parts()]
+        return PoseSeries(*parts)
 
     def at(
         self,
@@ -540,10 +546,23 @@ class PoseSeries:
             arr[~ok] = np.nan
         pos[~ok] = np.nan
         rot[~ok] = np.nan
-        batch = PoseBatch(q, ok, pan, tilt, roll, hfov, pos, rot, None, self._quat is not None)
+        has_platform = self._quat is not None
+        r_world_cam = None
         if head is not None:
-            object.__setattr__(batch, "R_world_cam", batch.camera_rotations(head))
-        return batch
+            r_world_cam = _camera_rotations(head, pan, tilt, roll, rot if has_platform else None)
+        return PoseBatch(q, ok, pan, tilt, roll, hfov, pos, rot, r_world_cam, has_platform)
+
+
+def _camera_rotations(
+    head: PanTiltHead,
+    pan_deg: np.ndarray,
+    tilt_deg: np.ndarray,
+    roll_deg: np.ndarray,
+    platform: np.ndarray | None,
+) -> np.ndarray:
+    """``R_world_cam`` (n, 3, 3) of head joint angles, on a platform ``R_world_body`` if any."""
+    r = rotations_from_azimuth_tilt_roll(head.mount_yaw_deg + pan_deg, tilt_deg, roll_deg)
+    return r if platform is None else platform @ r
 
 
 def _lerp(v: np.ndarray, k0: np.ndarray, k1: np.ndarray, a: np.ndarray) -> np.ndarray:

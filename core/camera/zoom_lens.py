@@ -30,6 +30,7 @@ With a table (:class:`ZoomTable`, stored in ``site.json`` as ``"zoom_table"``)
 from __future__ import annotations
 
 import bisect
+import functools
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, fields
@@ -232,9 +233,19 @@ def intrinsics_for_hfov(
         For an hfov that is not in (0, 180), or outside the table.
     """
     if zoom is not None:
-        return zoom.intrinsics_at(hfov_deg, base)
+        return _table_lens(zoom, float(hfov_deg), base)
     fx = ideal_focal_px(base.width, hfov_deg)
     return Intrinsics(
         fx, fx * (base.fy / base.fx), base.cx, base.cy, base.width, base.height,
         *base.lens_coeffs,
     )  # fmt: skip
+
+
+@functools.lru_cache(maxsize=512)
+def _table_lens(zoom: ZoomTable, hfov_deg: float, base: Intrinsics) -> Intrinsics:
+    """:meth:`ZoomTable.intrinsics_at`, kept for the zooms last asked for.
+
+    A lens is checked for invertibility when it is built (about a millisecond with
+    distortion); a head holds its zoom for many frames, so the same few come back.
+    """
+    return zoom.intrinsics_at(hfov_deg, base)

@@ -54,7 +54,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..camera.zoom_lens import intrinsics_for_hfov
-from ..errors import PoseError, TrackingError
+from ..errors import CameraError, TrackingError
 from ..tracking.types import Detection, Fix
 from .posed_rays import PosedView, posed_view_rays
 
@@ -226,7 +226,13 @@ def build_fixes(
     parts = geo.pixel_rays(views)
     for sensor, idx in posed:
         for view, rows in _posed_views(sensor, poses.get(sensor.id), detections, idx, counts):
-            parts.append(posed_view_rays(view, geo.pixel_sigma_px))
+            rays = posed_view_rays(view, geo.pixel_sigma_px)
+            good = np.isfinite(rays[1]).all(axis=1) & np.isfinite(rays[3]).all(axis=1)
+            if not good.all():  # no inverse of the lens at that zoom: no ray, no fix
+                counts["no_pose"] += int(np.count_nonzero(~good))
+                rays = tuple(r[good] for r in rays)  # type: ignore[assignment]
+                rows = [r for r, g in zip(rows, good.tolist(), strict=True) if g]
+            parts.append(rays)
             order += rows
     # One batch for every sensor: one ray cast, vectorised uncertainty and road rule.
     batch = geo.locate_ray_parts(parts)
@@ -300,7 +306,14 @@ def _posed_views(
     boxes = np.array([detections[idx[k]].bbox for k in sel], dtype=np.float64).reshape(-1, 4)
     u = np.clip(0.5 * (boxes[:, 0] + boxes[:, 2]), -0.5, w - 0.5)
     v = np.clip(boxes[:, 3], -0.5, h - 0.5)
-    # One lens per distinct zoom (NaN: the calibrated lens).
+    if sensor.zoom is None and series is not None and series.has_zoom:
+        # The ideal zoom of the calibrated lens: only the focal lengths change, so one
+        # view with per-pixel focal lengths (one undistortion for all of them).
+        base = head.intrinsics
+        fx = 0.5 * base.width / np.tan(np.radians(hfov) / 2.0)
+        view = PosedView(base, u, v, rot, pos, fx, fx * (base.fy / base.fx))
+        return [(view, [idx[k] for k in sel.tolist()])]
+    # With a calibration table, one lens per distinct zoom (NaN: the calibrated lens).
     key = np.where(np.isnan(hfov), -1.0, hfov)
     zooms, group = np.unique(key, return_inverse=True)
     out = []
@@ -312,7 +325,7 @@ def _posed_views(
                 if zoom < 0.0
                 else intrinsics_for_hfov(head.intrinsics, zoom, sensor.zoom)
             )
-        except PoseError:  # a zoom outside the lens's calibration table: no lens, no fix
+        except CameraError:  # a zoom off the lens's table (or a lens with no inverse there)
             counts["no_pose"] += len(rows)
             continue
         view = PosedView(intr, u[rows], v[rows], rot[rows], pos[rows])

@@ -155,11 +155,11 @@ def estimate_pose_latency(
     t_first, t_last = float(series.t_s[0]), float(series.t_s[-1])
     seen: set[float] = set()
     use: list[Detection] = []
-    for d in sorted((d for d in detections if d.sensor == sensor_id), key=lambda d: d.t_s):
-        if d.t_s in seen or d.t_s + lo < t_first or d.t_s + hi > t_last:
+    for det in sorted((d for d in detections if d.sensor == sensor_id), key=lambda d: d.t_s):
+        if det.t_s in seen or det.t_s + lo < t_first or det.t_s + hi > t_last:
             continue
-        seen.add(d.t_s)
-        use.append(d)
+        seen.add(det.t_s)
+        use.append(det)
     if len(use) < 5:
         raise PoseError(
             f"a latency estimate needs at least 5 detections of {sensor_id} inside the pose "

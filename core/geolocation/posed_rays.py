@@ -8,14 +8,23 @@ pixel. Its rays are made in the camera frame once for the whole view (one undist
 the same perturbation arithmetic as the fixed path) and each is turned into the site
 frame by its own rotation, so a batch of posed detections still takes one ray cast with
 the fixed ones (:meth:`~demtrack.core.geolocation.geolocate.Geolocator.locate_ray_parts`).
+
+A zoom that changes from pixel to pixel without a calibration table (the ideal zoom of
+:func:`~demtrack.core.camera.zoom_lens.intrinsics_for_hfov`) changes only the focal
+lengths: a view may carry per-pixel ``fx_px``, ``fy_px`` over its lens's principal point
+and distortion, and still takes one undistortion for all its pixels. Pixels the lens
+model cannot invert at their zoom (beyond its radial fold, possible for zooms wider than
+the calibrated one) come back as NaN rays.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from ..camera.lens import undistort_normalized_nb
 from ..camera.pinhole import Intrinsics
 from ..errors import CameraError
 from .geolocate import _perturbations_from_unit, _pixels
@@ -37,6 +46,8 @@ class PosedView:
         Per pixel, the rotation of camera-frame (OpenCV) vectors into the site frame.
     position_enu : ndarray, shape (k, 3)
         Per pixel, the optical centre (site frame, m).
+    fx_px, fy_px : ndarray, shape (k,), optional
+        Per-pixel focal lengths (px) in place of the lens's (a zoom without a table).
     """
 
     intrinsics: Intrinsics
@@ -44,6 +55,8 @@ class PosedView:
     v: np.ndarray
     R_world_cam: np.ndarray  # noqa: N815 - frame names follow the project's convention
     position_enu: np.ndarray
+    fx_px: np.ndarray | None = None
+    fy_px: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         k = len(np.atleast_1d(self.u))
@@ -58,6 +71,24 @@ class PosedView:
             raise CameraError("a posed view's rotations and positions must be finite")
         object.__setattr__(self, "R_world_cam", rot)
         object.__setattr__(self, "position_enu", pos)
+        if (self.fx_px is None) != (self.fy_px is None):
+            raise CameraError("a posed view takes both fx_px and fy_px, or neither")
+        for name in ("fx_px", "fy_px"):
+            f = getattr(self, name)
+            if f is not None:
+                f = np.asarray(f, dtype=np.float64)
+                if f.shape != (k,) or not (np.isfinite(f) & (f > 0)).all():
+                    raise CameraError(f"{name} must be {k} positive focal lengths")
+                object.__setattr__(self, name, f)
+
+
+@dataclass(frozen=True)
+class _PixelLens:
+    """Per-pixel focal lengths over one lens's distortion, for the perturbation arithmetic."""
+
+    fx: Any
+    fy: Any
+    lens_coeffs: tuple[float, ...]
 
 
 def posed_view_rays(
@@ -80,14 +111,27 @@ def posed_view_rays(
     perturb_sigmas : ndarray, shape (k, 2)
         The angles (rad) those tips take for ``sigma_px``.
 
+    NaN rows where the lens has no inverse at a pixel's zoom.
+
     Raises
     ------
     CameraError
         If a pixel lies outside the image.
     """
     u, v = _pixels(view, view.u, view.v)
-    intr = view.intrinsics
-    xn, yn = intr.undistort(u, v)
+    base = view.intrinsics
+    intr: Any = base
+    if view.fx_px is None or view.fy_px is None:
+        xn, yn = base.undistort(u, v)
+    else:
+        intr = _PixelLens(view.fx_px, view.fy_px, base.lens_coeffs)
+        k1, k2, p1, p2, k3, k4 = base.lens_coeffs
+        xn, yn = undistort_normalized_nb(
+            (u - base.cx) / view.fx_px,
+            (v - base.cy) / view.fy_px,
+            k1, k2, p1, p2, k3, k4,
+            r_max=base.fold_radius,
+        )  # fmt: skip
     ray = np.empty((len(xn), 3))
     ray[:, 0], ray[:, 1], ray[:, 2] = xn, yn, 1.0
     norm = np.linalg.norm(ray, axis=-1, keepdims=True)

@@ -1,4 +1,4 @@
-"""``demtrack bench raycast|viewshed|server|pipeline|console-soak|lidar-holdout``."""
+"""``demtrack bench raycast|viewshed|server|pipeline|console-soak|lidar-holdout|video``."""
 
 from __future__ import annotations
 
@@ -8,7 +8,14 @@ __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
-    from demtrack.bench import lidar_holdout, pipeline_replay, raycast, server_bench, viewshed
+    from demtrack.bench import (
+        lidar_holdout,
+        pipeline_replay,
+        raycast,
+        server_bench,
+        video_detect,
+        viewshed,
+    )
 
     jobs = {
         "raycast": raycast.main,
@@ -16,6 +23,7 @@ def _run(args: argparse.Namespace) -> int:
         "server": server_bench.main,
         "pipeline": pipeline_replay.main,
         "lidar-holdout": lidar_holdout.main,
+        "video": video_detect.main,
     }
     if args.bench == "console-soak":  # Playwright is imported only for this one
         from demtrack.bench import console_soak
@@ -51,6 +59,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         add_help=False,
     )
     lh.set_defaults(func=_run)
+    vd = bsub.add_parser(
+        "video",
+        help="demtrack watch's detection path on 1280x720 video vs OpenCV MOG2, one core",
+        add_help=False,
+    )
+    vd.set_defaults(func=_run)
     c = bsub.add_parser(
         "console-soak",
         help="the console in Chromium over a long replay at 10x with about 20 tracks",

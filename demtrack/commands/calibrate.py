@@ -81,13 +81,15 @@ def _run(args: argparse.Namespace) -> int:
 
 def _fitted_sensor(site: Site, sensor: Sensor, fit: GcpFit) -> Sensor:
     """The sensor posed as the fit says: yaw = mount yaw + pan reading, tilt, roll."""
+    import dataclasses
+
     from demtrack.core.camera.pantilt import PanTiltHead
-    from demtrack.core.site.folder import Sensor
 
     cam = fit.camera
     az, tilt, roll = cam.azimuth_tilt_roll_deg()
     head = PanTiltHead(cam.position_enu, az - sensor.pan_deg, cam.intrinsics, sensor.head.landmarks)
-    return Sensor(sensor.id, sensor.name, head, sensor.pan_deg, tilt, sensor.image_path, roll)
+    # replace, not a new Sensor: the PTZ fields (active, zoom, latency, slew limits) stay.
+    return dataclasses.replace(sensor, head=head, tilt_deg=tilt, roll_deg=roll)
 
 
 def _prior_position(args: argparse.Namespace, site: Site) -> dict[str, tuple[float, float]]:

@@ -13,6 +13,7 @@ from demtrack.core.errors import InputFileError
 
 from .choices import ACTIVE_LATENCY_S, ACTIVE_SCENARIO_NAMES, SCENARIO_NAMES, TRACKING_METHODS
 from .common import add_site_argument
+from .evaluate_active import STUB_S, metrics_doc, n_stubs
 from .scenario import add_scenario_parameters, params_from_args
 
 if TYPE_CHECKING:
@@ -50,17 +51,9 @@ def tracking_config(vehicle_coast_s: float = 4.0, human_coast_s: float = 4.0) ->
     )
 
 
-#: A track spanning less than this from first to last point is a stub (s).
-STUB_S = 5.0
-
 #: The live server's batches in scenario seconds: the replay's 0.1 s wall-time batch
 #: interval (``DEMTRACK_REPLAY_BATCH_S``) at 1x and at 10x.
 SERVER_BATCHES: tuple[tuple[str, float], ...] = (("1x", 0.1), ("10x", 1.0))
-
-
-def n_stubs(tracks: Sequence[Track], min_s: float = STUB_S) -> int:
-    """How many ``tracks`` span less than ``min_s`` seconds."""
-    return sum(1 for t in tracks if t.points and t.points[-1].t_s - t.points[0].t_s < min_s)
 
 
 def format_table(rows: Sequence[tuple[str, TrackingMetrics, int, int | None]]) -> str:
@@ -154,8 +147,6 @@ def _run(args: argparse.Namespace) -> int:
     from demtrack.core.tracking import evaluate, run_tracker
     from demtrack.samplesite.scenarios import make_scenario
 
-    from .evaluate_active import metrics_doc
-
     params = params_from_args(args)
     site = load_site(args.site)
     sc = make_scenario(site, args.scenario, params)
@@ -208,8 +199,8 @@ def _run_active(args: argparse.Namespace, methods: Sequence[str]) -> int:
     """An active scenario: the heads' run and its baselines (:mod:`.evaluate_active`)."""
     from .evaluate_active import format_comparisons, run_active
 
-    doc = run_active(args, methods, tracking_config())
-    rows = [(name, m, stubs, None) for name, m, stubs in doc.pop("_rows")]
+    doc = run_active(args, methods, tracking_config(), SERVER_BATCHES)
+    rows = doc.pop("_rows")
     if args.json:
         print(json.dumps(doc, indent=2))
         return 0
@@ -225,8 +216,6 @@ def _run_active(args: argparse.Namespace, methods: Sequence[str]) -> int:
     print(format_table(rows))
     print(f"\ncompared, with the best method ({doc['best_method']}):")
     print(format_comparisons(doc))
-    if args.server_method != "none":
-        print("(the server's rows are left out: its offline replay takes no pose telemetry)")
     return 0
 
 

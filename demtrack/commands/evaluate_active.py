@@ -1,4 +1,7 @@
-"""``demtrack evaluate`` on an active scenario: PTZ heads with telemetry, and two baselines.
+"""``demtrack evaluate`` on an active scenario: PTZ heads with telemetry, and baselines.
+
+Also the per-method scoring helpers every scenario's ``evaluate`` shares (:func:`n_stubs`,
+:func:`metrics_doc`).
 
 The heads' detections are geolocated at the pose of each detection's moment (the
 scenario's telemetry, with the site's sensors made active and ``pose_latency_s`` set),
@@ -26,9 +29,25 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from demtrack.core.site.folder import Site
-    from demtrack.core.tracking import Fix, TrackerConfig, TrackingMetrics, TruthPath
+    from demtrack.core.tracking import Fix, Track, TrackerConfig, TrackingMetrics, TruthPath
 
-__all__ = ["best_method", "fix_errors", "format_comparisons", "metrics_doc", "run_active"]
+__all__ = [
+    "STUB_S",
+    "best_method",
+    "fix_errors",
+    "format_comparisons",
+    "metrics_doc",
+    "n_stubs",
+    "run_active",
+]
+
+#: A track spanning less than this from first to last point is a stub (s).
+STUB_S = 5.0
+
+
+def n_stubs(tracks: Sequence[Track], min_s: float = STUB_S) -> int:
+    """How many ``tracks`` span less than ``min_s`` seconds."""
+    return sum(1 for t in tracks if t.points and t.points[-1].t_s - t.points[0].t_s < min_s)
 
 
 def metrics_doc(m: TrackingMetrics, stubs: int | None = None) -> dict[str, Any]:
@@ -97,8 +116,6 @@ def fix_errors(fixes: Sequence[Fix], truths: Sequence[TruthPath]) -> dict[str, A
 def _score(fixes, site: Site, method: str, truths, config: TrackerConfig):
     from demtrack.core.tracking import evaluate, run_tracker
 
-    from .evaluate import n_stubs
-
     roads = site.roads if method != "raw-first" else None
     tracks = run_tracker(fixes, method, roads=roads, config=config)
     return tracks, evaluate(tracks, truths), n_stubs(tracks)
@@ -116,12 +133,36 @@ def _variant(label, fixes, report, n_dets, site, method, truths, config, share) 
     return doc
 
 
+def _server_rows(args: argparse.Namespace, site: Site, sc: Any, batches: Sequence) -> list:
+    """The live server's tracks of the heads' detections and telemetry, per batching."""
+    if args.server_method == "none":
+        return []
+    from demtrack.core.tracking import evaluate
+    from demtrack.server.ingest.offline_replay import early_ended, replay_detections
+
+    out = []
+    for speed, batch_s in batches:
+        live = replay_detections(
+            site, sc.detections, method=args.server_method, batch_s=batch_s, poses=sc.poses
+        )
+        m = evaluate(live.tracks, sc.truths)
+        name = f"server {speed} ({args.server_method})"
+        out.append((name, m, n_stubs(live.tracks), len(early_ended(live))))
+    return out
+
+
 def run_active(
-    args: argparse.Namespace, methods: Sequence[str], config: TrackerConfig
+    args: argparse.Namespace,
+    methods: Sequence[str],
+    config: TrackerConfig,
+    server_batches: Sequence[tuple[str, float]] = (),
 ) -> dict[str, Any]:
     """Generate, geolocate, track and score an active scenario and its baselines.
 
-    Returns the ``--json`` document; prints nothing.
+    ``server_batches`` (``(label, batch_s)``) are the live server's replays to score when
+    ``args.server_method`` is not ``none``: the detections and the telemetry through its
+    ingest pipeline. Returns the ``--json`` document (its ``_rows`` for the table); prints
+    nothing.
     """
     from dataclasses import replace
 
@@ -142,13 +183,16 @@ def run_active(
     posed = active_site(site, latency)
     fixes, report = build_fixes(posed, sc.detections, poses=sc.poses)
     share = sc.in_view_share
-    rows = []
+    rows: list[tuple[str, TrackingMetrics, int, int | None]] = []
     doc_methods = {}
     for name in methods:
         tracks, m, stubs = _score(fixes, posed, name, sc.truths, config)
-        rows.append((name, m, stubs))
+        rows.append((name, m, stubs, None))
         doc_methods[name] = {**metrics_doc(m, stubs), "in_view_share": round(share, 4)}
-    best = best_method([(n, m) for n, m, _ in rows])
+    best = best_method([(n, m) for n, m, _, _ in rows])
+    for name, m, stubs, early in _server_rows(args, posed, sc, server_batches):
+        rows.append((name, m, stubs, early))
+        doc_methods[name] = {**metrics_doc(m, stubs), "in_view_share": round(share, 4)}
     n = len(sc.detections)
     active_doc = _variant(
         f"active heads (telemetry, latency {latency:g} s)",

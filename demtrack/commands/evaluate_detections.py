@@ -35,6 +35,14 @@ def _detect(site: Any, sensor: str, video: Path, detector: str) -> tuple[list, f
     return dets, time.perf_counter() - clock
 
 
+def _read_saved(path: Path, sensor: str) -> list:
+    """A saved detections file's records of ``sensor`` (``demtrack watch``'s JSON Lines)."""
+    from demtrack.core.io.detections import read_detections
+
+    dets, _ = read_detections(path)
+    return [d for d in dets if d.sensor == sensor]
+
+
 def _fmt(x: float, digits: int = 3) -> str:
     return "-" if not math.isfinite(x) else f"{x:.{digits}f}"
 
@@ -94,9 +102,20 @@ def _run(args: argparse.Namespace) -> int:
             f"give one --video per --sensor, in the same order ({len(sensors)} sensors,"
             f" {len(videos)} videos)"
         )
+    saved = [Path(p) for p in args.detections or ()]
+    if saved and len(saved) != len(sensors):
+        raise InputFileError(
+            f"give one --detections per --sensor, in the same order ({len(sensors)} sensors,"
+            f" {len(saved)} detection files)"
+        )
     from demtrack.core.site.folder import load_site
     from demtrack.samplesite.scenarios import make_scenario
-    from demtrack.samplesite.video_eval import DetectionScores, score_detections, truth_detections
+    from demtrack.samplesite.video_eval import (
+        DetectionScores,
+        score_detections,
+        scored_from,
+        truth_detections,
+    )
     from demtrack.samplesite.video_file import read_video_truth, truth_path_for
 
     truths_by_video = []
@@ -112,11 +131,15 @@ def _run(args: argparse.Namespace) -> int:
         truths_by_video.append(vt)
     site = load_site(args.site)
     scores, video_dets, box_dets, speed = [], [], [], []
-    for sensor, video, vt in zip(sensors, videos, truths_by_video, strict=True):
-        dets, seconds = _detect(site, sensor, video, args.detector)
-        speed.append((sensor, len(vt.frames) / seconds if seconds > 0 else math.inf))
-        scores.append(score_detections(site, dets, vt))
-        video_dets += dets
+    for k, (sensor, video, vt) in enumerate(zip(sensors, videos, truths_by_video, strict=True)):
+        if saved:
+            dets = _read_saved(saved[k], sensor)
+        else:
+            dets, seconds = _detect(site, sensor, video, args.detector)
+            speed.append((sensor, len(vt.frames) / seconds if seconds > 0 else math.inf))
+        scores.append(score_detections(site, dets, vt, score_from_s=args.score_from))
+        t_scored = scored_from(vt, args.score_from)
+        video_dets += [d for d in dets if d.t_s >= t_scored]
         box_dets += truth_detections(vt)
     start_s = truths_by_video[0].start_s
     sc = make_scenario(site, args.scenario)
@@ -129,7 +152,8 @@ def _run(args: argparse.Namespace) -> int:
     best, fails = _verdict(pooled, rows)
     doc = {
         "scenario": args.scenario,
-        "detector": args.detector,
+        "detector": "saved detections" if saved else args.detector,
+        "scored_from_s": args.score_from,
         "detection": per_sensor + ([pooled] if len(scores) > 1 else []),
         "detector_frames_per_s": {s: round(f, 1) for s, f in speed},
         "tracking": rows,
@@ -140,7 +164,7 @@ def _run(args: argparse.Namespace) -> int:
         print(json.dumps(doc, indent=2))
         return 0
     print(
-        f"{args.scenario}, detector {args.detector}: detection at IoU 0.5"
+        f"{args.scenario}, detector {doc['detector']}: detection at IoU 0.5"
         " (foot error: median / p95)\n"
         "| sensor | true boxes | detections | precision | recall | mean IoU | class acc."
         " | foot px | foot m | frames/s |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
@@ -170,6 +194,13 @@ def _run(args: argparse.Namespace) -> int:
                 f"{m['tracks']} ({m['false_tracks']})",
             ]
         print(f"| {r['method']} | " + " | ".join(cells) + " |")
+    print(
+        "\nrecall by true box height: "
+        + "; ".join(
+            f"{s['sensor']} " + ", ".join(f"{k} {v:.2f}" for k, v in s["recall_by_height"].items())
+            for s in doc["detection"]
+        )
+    )
     verdict = "meets the bar" if not fails else "misses the bar: " + "; ".join(fails)
     print(f"\nbest method from video: {best['method']}; {verdict}")
     return 0
@@ -194,6 +225,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--detector", choices=("vsam", "mog2", "knn"), default="vsam", help="default vsam"
+    )
+    p.add_argument(
+        "--detections",
+        action="append",
+        metavar="FILE",
+        help="score these saved detections (CSV or JSON Lines, e.g. from demtrack watch)"
+        " instead of running the detector (repeatable, in --sensor order)",
+    )
+    p.add_argument(
+        "--score-from",
+        type=float,
+        metavar="S",
+        help="score (and track) from this scenario time (s; default: the first motion, after"
+        " the video's lead-in in which the detector learns the scene)",
     )
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(func=_run)

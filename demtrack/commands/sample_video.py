@@ -73,7 +73,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--t-from",
         type=float,
         metavar="S",
-        help="first frame, scenario seconds (default 5 s before the first target moves)",
+        help="first frame, scenario seconds (default 15 s before the first target moves)",
     )
     p.add_argument("--t-to", type=float, metavar="S", help="last frame (default: the end)")
     p.add_argument("--rate", type=positive, metavar="HZ", help="frame rate (default 10)")

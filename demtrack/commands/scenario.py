@@ -96,6 +96,12 @@ def _run(args: argparse.Namespace) -> int:
         write_detections_jsonl(out, sc.detections)
     if args.truth is not None:
         write_truth_json(args.truth, sc)
+    s = sc.stats
+    print(
+        f"{sc.name}: {len(sc.detections)} detections from {s['frames']} frames"
+        f" ({s['detected']} of targets, {s['partly_hidden']} partly hidden, {s['hidden']} hidden,"
+        f" {s['missed']} missed, {s['false_alarms']} false alarms) -> {out}"
+    )
     if sc.poses:
         poses_path = _poses_path(out, args.poses)
         write_poses = write_poses_csv if poses_path.suffix.lower() == ".csv" else write_poses_jsonl
@@ -103,14 +109,8 @@ def _run(args: argparse.Namespace) -> int:
         n = sum(len(p) for p in sc.poses.values())
         print(
             f"pose telemetry: {n} samples of {len(sc.poses)} heads -> {poses_path}"
-            f" (stamps {ACTIVE_LATENCY_S:g} s late: set the sensors' pose_latency_s)"
+            f" (stamps {ACTIVE_LATENCY_S:g} s late, the sample sensors' pose_latency_s)"
         )
-    s = sc.stats
-    print(
-        f"{sc.name}: {len(sc.detections)} detections from {s['frames']} frames"
-        f" ({s['detected']} of targets, {s['partly_hidden']} partly hidden, {s['hidden']} hidden,"
-        f" {s['missed']} missed, {s['false_alarms']} false alarms) -> {out}"
-    )
     print(f"times: UTC from {format_utc(t0_s)} (t = UNIX seconds)")
     return 0
 

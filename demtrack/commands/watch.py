@@ -71,8 +71,9 @@ class _Progress:
         return self.line()
 
 
-def _pose_records(klv_packets, site) -> list[dict[str, Any]]:
-    from demtrack.core.errors import VideoError
+def _pose_records(klv_packets, site, sensor: str) -> list[dict[str, Any]]:
+    """The pose file / ``/poses`` records of the KLV packets (:mod:`demtrack.core.io.pose_io`)."""
+    from demtrack.core.errors import DemtrackError
     from demtrack.core.video.klv import iter_uas_datalink, to_pose_sample
 
     out = []
@@ -80,16 +81,20 @@ def _pose_records(klv_packets, site) -> list[dict[str, Any]]:
         try:
             for d in iter_uas_datalink(pk.data):
                 p = to_pose_sample(d, site.frame, site.geoid, t_s=pk.t_s)
-                rec: dict[str, Any] = {"t": p.t_s, "pan_deg": p.pan_deg, "tilt_deg": p.tilt_deg}
+                rec: dict[str, Any] = {
+                    "sensor": sensor, "t": p.t_s, "pan_deg": p.pan_deg, "tilt_deg": p.tilt_deg,
+                }  # fmt: skip
                 if p.hfov_deg is not None:
                     rec["hfov_deg"] = p.hfov_deg
-                rec["roll_deg"] = p.roll_deg
+                if p.roll_deg != 0.0:
+                    rec["roll_deg"] = p.roll_deg
                 if p.position_enu is not None:
-                    rec["position_enu"] = list(p.position_enu)
+                    rec.update(zip(("e_m", "n_m", "u_m"), p.position_enu, strict=True))
                 if p.platform_ypr_deg is not None:
-                    rec["platform_ypr_deg"] = list(p.platform_ypr_deg)
+                    names = ("yaw_deg", "pitch_deg", "platform_roll_deg")
+                    rec.update(zip(names, p.platform_ypr_deg, strict=True))
                 out.append(rec)
-        except VideoError as exc:  # one bad packet is skipped, said once per packet
+        except DemtrackError as exc:  # a bad packet (checksum, a tilt past 90) is skipped
             print(f"demtrack watch: skipped a KLV packet: {exc}", file=sys.stderr)
     return out
 
@@ -123,7 +128,7 @@ def _watch_once(args, site, sink, progress, session: str, index0: int) -> int:
                 batch = Batch(batch_key(args.sensor, source, index, session))
             batch.detections += [detection_record(d) for d in res.detections]
             if res.klv:
-                batch.poses += _pose_records(res.klv, site)
+                batch.poses += _pose_records(res.klv, site, args.sensor)
             count += 1
             progress.update(1 if res.index >= 0 else 0, len(res.detections))
             if count >= args.batch_frames:

@@ -34,8 +34,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from demtrack.core.camera.head_motion import HeadCommand, HeadState, SlewLimits, time_to_reach
-from demtrack.core.camera.pantilt import PanTiltHead, wrap_deg
+from demtrack.core.camera.pantilt import PanTiltHead
 from demtrack.core.camera.pinhole import Camera
+from demtrack.core.camera.pointing import point_head_at
 from demtrack.core.camera.pose_series import PoseSample, camera_at
 from demtrack.core.camera.zoom_lens import ZoomTable, intrinsics_for_hfov
 from demtrack.core.geolocation.fix_builder import default_foot_offsets
@@ -330,10 +331,9 @@ class Follower:
         return float(min(max(hfov, lo), hi))
 
     def _aim(self, info: HeadInfo, p_enu: np.ndarray) -> tuple[float, float]:
-        # Centre the car's middle (half its 1.5 m height above the ground point).
-        d = np.asarray(p_enu, dtype=np.float64) + [0.0, 0.0, 0.75] - info.head.position_enu
-        pan = float(wrap_deg(math.degrees(math.atan2(d[0], d[1])) - info.head.mount_yaw_deg))
-        tilt = math.degrees(math.atan2(d[2], math.hypot(d[0], d[1])))
+        # Centre the car's middle (half its 1.5 m height above the ground point). The
+        # calibrated lens's centre ray: the zoom's keeps the principal point here.
+        pan, tilt = point_head_at(info.head, np.asarray(p_enu) + [0.0, 0.0, 0.75])
         lim = info.limits
         return float(pan), float(min(max(tilt, lim.tilt_min_deg), lim.tilt_max_deg))
 

@@ -41,6 +41,7 @@ from demtrack.core.site.folder import Sensor, Site
 from demtrack.core.tracking.types import Detection
 
 from .active_follow import Follower, FollowParams, HeadInfo, ZoomedHead
+from .cameras import TELEMETRY_LATENCY_S
 from .scene_render import (
     STAT_KEYS,
     Scenario,
@@ -78,7 +79,7 @@ class ActiveParams:
 
     telemetry_hz: tuple[float, ...] = (12.5, 15.0, 20.0)
     telemetry_noise_deg: float = 0.05
-    latency_s: float = 0.08
+    latency_s: float = TELEMETRY_LATENCY_S
     substeps: int = 4
     follow: FollowParams = field(default_factory=FollowParams)
 
@@ -137,7 +138,7 @@ def _limits(sensor: Sensor) -> SlewLimits:
     return limits
 
 
-def active_site(site: Site, latency_s: float = 0.08) -> Site:
+def active_site(site: Site, latency_s: float = TELEMETRY_LATENCY_S) -> Site:
     """``site`` with every sensor an active head whose telemetry is ``latency_s`` late."""
     sensors = {
         sid: replace(s, active=True, pose_latency_s=float(latency_s))

@@ -4,7 +4,8 @@ The steps follow Collins et al. (1998): grid a helicopter laser scan at 0.5 m wi
 per-cell mean, variance and count; fill the holes from a 30 m coarse DEM; calibrate each
 pan-tilt head's yaw from landmark pan readings; then render each camera's view of the
 site by ray casting the DEM and draping the orthophoto. Each sensor is written with its
-head's ``slew_limits`` (it is a PTZ head, at rest: ``active`` stays false).
+head's ``slew_limits`` and its telemetry's ``pose_latency_s`` (it is a PTZ head, at rest:
+``active`` stays false).
 Deterministic for a given seed.
 
 The site is anchored at the real Bushy Run with its real vertical datum: ``site.json``
@@ -40,7 +41,7 @@ from demtrack.core.site.road_io import write_roads_geojson
 from demtrack.core.terrain.crs_import import local_crs_wkt
 from demtrack.core.terrain.dem import Dem
 
-from .cameras import sighting_heads, slew_limits_of
+from .cameras import TELEMETRY_LATENCY_S, sighting_heads, slew_limits_of
 from .kernel_warmup import load_numba_target
 from .ortho import ortho_grid, paint_orthophoto
 from .scan import coarse_dem, simulate_laser_scan
@@ -139,7 +140,14 @@ def _build(
         calibrated = head.with_mount_yaw(cal.yaw_deg)
         image_path = out / "images" / f"{spec.id}.png"
         sensor = Sensor(
-            spec.id, spec.name, calibrated, pan, tilt, image_path, slew_limits=slew_limits_of(spec)
+            spec.id,
+            spec.name,
+            calibrated,
+            pan,
+            tilt,
+            image_path,
+            pose_latency_s=TELEMETRY_LATENCY_S,
+            slew_limits=slew_limits_of(spec),
         )
         Image.fromarray(render_view(sensor.camera, dem, rgb, grid)).save(image_path)
         return spec, head, cal, sensor

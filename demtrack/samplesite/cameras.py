@@ -2,7 +2,8 @@
 
 The cameras are pan-tilt-zoom heads (:func:`slew_limits_of`, written to ``site.json`` as
 each sensor's ``slew_limits``), left at rest (``active`` false) for every scenario but
-the active ones, whose heads move (:mod:`.active_scenario`).
+the active ones, whose heads move and report their pose (:mod:`.active_scenario`) with
+stamps :data:`TELEMETRY_LATENCY_S` late, the sensors' ``pose_latency_s``.
 
 Each camera has a true mount yaw (unknown to the operator) and a commanded pan and tilt
 that point it at part of the site. The operator's yaw comes from landmark sightings:
@@ -22,9 +23,18 @@ from demtrack.core.camera.pinhole import Intrinsics
 
 from .world import PARKING, World
 
-__all__ = ["CameraSpec", "SAMPLE_CAMERAS", "landmark_points", "sighting_heads", "slew_limits_of"]
+__all__ = [
+    "CameraSpec",
+    "SAMPLE_CAMERAS",
+    "TELEMETRY_LATENCY_S",
+    "landmark_points",
+    "sighting_heads",
+    "slew_limits_of",
+]
 
 PAN_NOISE_DEG = 0.03
+#: How late the simulated heads' telemetry stamps are relative to the frames (s).
+TELEMETRY_LATENCY_S = 0.08
 BLUNDER_DEG = 2.0
 
 

@@ -24,7 +24,9 @@ class SampleScenarios:
 
     The trajectory scenarios (:data:`~.scenarios.SCENARIOS`) and the activity cases
     (:data:`~.activity_scenarios.ACTIVITY_CASES`: loitering, rendezvous, convoys, ...), so a
-    live replay can show every activity detector.
+    live replay can show every activity detector. ``active-handoff`` comes with its heads'
+    pose telemetry (:attr:`~.scene_render.Scenario.poses`), which the replay posts beside
+    the detections; the sample site's sensors carry its latency (``pose_latency_s``).
     """
 
     @property

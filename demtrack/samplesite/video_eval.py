@@ -6,6 +6,9 @@ a true positive; an unmatched counted box a miss; an unmatched detection a false
 unless at least half of it lies on a box that is in view but not counted (mostly hidden
 or cut by the border): that one is neither (an "ignore region", as MOT benchmarks do).
 A detection whose time is more than half a frame from every frame counts as false.
+Frames before ``score_from_s`` (default: the scenario's first motion, after the video's
+lead-in, which is the detector's time to learn the scene) are not scored at all, as the
+change-detection benchmarks leave out their first frames (CDnet's temporal ROI).
 
 The foot pixel is a box's bottom centre (the paper's); its error on the ground is the
 horizontal distance between the site geolocator's first hits of the detected and the
@@ -14,6 +17,7 @@ true foot pixels (the calibrated cameras, as the tracker sees them).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -32,10 +36,13 @@ __all__ = [
     "iou_matrix",
     "match_boxes",
     "score_detections",
+    "scored_from",
     "truth_detections",
 ]
 
 MIN_IOU = 0.5
+#: Box heights (px) binning the recall: far walkers are under 10 px tall here.
+SIZE_EDGES_PX = (10.0, 20.0)
 
 
 @dataclass(frozen=True)
@@ -57,6 +64,8 @@ class DetectionScores:
         foot pixel's ray meets no ground).
     n_ignored : int
         Detections on boxes that are not counted.
+    truth_heights_px, truth_found : ndarray
+        Height (px) of each counted true box, and whether it was matched (recall by size).
     """
 
     sensor: str
@@ -68,6 +77,19 @@ class DetectionScores:
     foot_px: np.ndarray = field(repr=False)
     foot_m: np.ndarray = field(repr=False)
     n_ignored: int = 0
+    truth_heights_px: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    truth_found: np.ndarray = field(default_factory=lambda: np.zeros(0, bool), repr=False)
+
+    def recall_by_height(self, edges_px: Sequence[float] = SIZE_EDGES_PX) -> dict[str, float]:
+        """Recall of the true boxes binned by their height (px): ``"lo-hi px"`` -> recall."""
+        out = {}
+        bounds = [0.0, *edges_px, math.inf]
+        for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
+            sel = (self.truth_heights_px >= lo) & (self.truth_heights_px < hi)
+            name = f"{lo:g}-{hi:g} px" if math.isfinite(hi) else f">= {lo:g} px"
+            if sel.any():
+                out[name] = round(float(self.truth_found[sel].mean()), 4)
+        return out
 
     @property
     def precision(self) -> float:
@@ -110,6 +132,7 @@ class DetectionScores:
             "foot_px_p95": q(self.foot_px, 95),
             "foot_m_median": q(fm, 50),
             "foot_m_p95": q(fm, 95),
+            "recall_by_height": self.recall_by_height(),
         }
 
     @staticmethod
@@ -125,6 +148,8 @@ class DetectionScores:
             np.concatenate([s.foot_px for s in scores]) if scores else np.zeros(0),
             np.concatenate([s.foot_m for s in scores]) if scores else np.zeros(0),
             sum(s.n_ignored for s in scores),
+            np.concatenate([s.truth_heights_px for s in scores]) if scores else np.zeros(0),
+            np.concatenate([s.truth_found for s in scores]) if scores else np.zeros(0, bool),
         )
 
 
@@ -169,16 +194,38 @@ def _foot(box: Sequence[float]) -> tuple[float, float]:
     return (box[0] + box[2]) / 2.0, box[3]
 
 
+def scored_from(truth: VideoTruth, score_from_s: float | None = None) -> float:
+    """UNIX time of the first scored frame.
+
+    ``score_from_s`` scenario seconds; by default the scenario's first motion (``-inf``
+    for a truth file without it).
+    """
+    if score_from_s is None:
+        score_from_s = truth.header.get("t_first_motion_s", -math.inf)
+    return truth.start_s + float(score_from_s) - 1e-6
+
+
 def score_detections(
-    site: Site, detections: Sequence[Detection], truth: VideoTruth, min_iou: float = MIN_IOU
+    site: Site,
+    detections: Sequence[Detection],
+    truth: VideoTruth,
+    min_iou: float = MIN_IOU,
+    score_from_s: float | None = None,
 ) -> DetectionScores:
-    """Score one sensor's detections against its video's true boxes (module docstring)."""
+    """Score one sensor's detections against its video's true boxes (module docstring).
+
+    ``score_from_s`` : scenario seconds of the first scored frame (:func:`scored_from`).
+    """
     sensor = truth.sensor
-    frames = truth.frames
+    t_scored = scored_from(truth, score_from_s)
+    frames = [f for f in truth.frames if f["t_s"] >= t_scored]
+    detections = [d for d in detections if d.t_s >= t_scored - 0.5 / truth.header["rate_hz"]]
     t_frames = np.array([f["t_s"] for f in frames], dtype=np.float64)
     half = 0.5 / float(truth.header["rate_hz"])
     per_frame: dict[int, list[Detection]] = {}
     n_det = n_ignored = 0
+    heights: list[float] = []
+    found: list[bool] = []
     for d in detections:
         if d.sensor != sensor:
             continue
@@ -194,11 +241,14 @@ def score_detections(
         counted = [t for t in frame["targets"] if t["counted"]]
         ignore = np.array([t["bbox"] for t in frame["targets"] if t["bbox"] and not t["counted"]])
         n_truth += len(counted)
+        heights += [t["bbox"][3] - t["bbox"][1] for t in counted]
         dets = per_frame.get(k, [])
         d_boxes = np.array([d.bbox for d in dets], dtype=np.float64).reshape(-1, 4)
         t_boxes = np.array([t["bbox"] for t in counted], dtype=np.float64).reshape(-1, 4)
         pairs = match_boxes(d_boxes, t_boxes, min_iou)
         matched = {i for i, _, _ in pairs}
+        hit = {j for _, j, _ in pairs}
+        found += [j in hit for j in range(len(counted))]
         for i, j, iou in pairs:
             tp += 1
             ious.append(iou)
@@ -215,7 +265,17 @@ def score_detections(
     foot_px = np.array([np.hypot(a[0] - b[0], a[1] - b[1]) for a, b in feet])
     foot_m = _ground_errors(site, sensor, feet)
     return DetectionScores(
-        sensor, n_truth, n_det, tp, np.array(ious), correct, foot_px, foot_m, n_ignored
+        sensor,
+        n_truth,
+        n_det,
+        tp,
+        np.array(ious),
+        correct,
+        foot_px,
+        foot_m,
+        n_ignored,
+        np.array(heights),
+        np.array(found, dtype=bool),
     )
 
 

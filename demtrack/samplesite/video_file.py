@@ -46,8 +46,9 @@ __all__ = [
 
 TRUTH_FORMAT = "demtrack.video-truth"
 #: The video starts this long before the scenario's first motion (s): a detector's
-#: background model has an empty scene to learn first, as a camera that was running.
-LEAD_IN_S = 5.0
+#: background model has the scene (swaying crowns included) to learn first, as a camera
+#: that was running before; :mod:`.video_eval` scores from the first motion on.
+LEAD_IN_S = 15.0
 
 
 @dataclass(frozen=True)
@@ -176,6 +177,7 @@ def write_sample_video(
         "scenario_start_utc": format_utc(start_s),
         "video_creation_utc": format_utc(created_s, 0),
         "t_from_s": t0,
+        "t_first_motion_s": t_first,
         "t_to_s": float(times[-1]),
         "min_visible": MIN_VISIBLE,
         "border_px": BORDER_PX,

@@ -1,11 +1,12 @@
-"""``/api/sensors/{id}/head``, ``/slew``, ``/follow``: the pan-tilt-zoom heads.
+"""``/api/heads``, ``/api/sensors/{id}/head``, ``/slew``, ``/follow``: pan-tilt-zoom heads.
 
 ``PUT /slew`` points a head at a pan / tilt (/ field of view), or at a ground point
 (``e_m``, ``n_m`` and optionally ``u_m``, site frame, m: the inverse problem, with the
 sight line checked; 422 with the reason when the head cannot see it). ``PUT /follow``
 assigns it a live track, ``DELETE /follow`` releases it, ``GET /head`` says what it
-does and where it points. Writes need the operator token. An unknown sensor is 404, a
-sensor on a fixed mount 409, a head that does not answer 502.
+does and where it points (``GET /api/heads``: every active head). Writes need the
+operator token. An unknown sensor is 404, a sensor on a fixed mount 409, a head that
+does not answer 502.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from .errors import error_responses
 
 __all__ = ["FollowIn", "HeadOut", "SlewIn", "router"]
 
-router = APIRouter(prefix="/api/sensors", tags=["heads"])
+router = APIRouter(tags=["heads"])
 
 _Deg = Annotated[float, Field(allow_inf_nan=False, ge=-360.0, le=360.0)]
 _M = Annotated[float, Field(allow_inf_nan=False, ge=-1e7, le=1e7)]
@@ -122,7 +123,21 @@ async def _call(
 
 
 @router.get(
-    "/{sensor_id}/head",
+    "/api/heads",
+    response_model=list[HeadOut],
+    dependencies=READER,
+    responses=error_responses(401),
+    summary="Every active pan-tilt-zoom head",
+)
+async def list_heads(ctl: _Heads) -> list[HeadOut]:
+    """The active heads (sensors on a fixed mount are not listed; none when heads are off)."""
+    if ctl is None:
+        return []
+    return [_out(ctl.info(sid)) for sid in ctl.units]
+
+
+@router.get(
+    "/api/sensors/{sensor_id}/head",
     response_model=HeadOut,
     dependencies=READER,
     responses=error_responses(401, 404, 409),
@@ -134,7 +149,7 @@ async def get_head(sensor_id: str, state: StateDep, ctl: _Heads) -> HeadOut:
 
 
 @router.put(
-    "/{sensor_id}/slew",
+    "/api/sensors/{sensor_id}/slew",
     response_model=HeadOut,
     dependencies=OPERATOR,
     responses=error_responses(401, 404, 409, 422, 502),
@@ -148,7 +163,7 @@ async def slew(sensor_id: str, body: SlewIn, state: StateDep, ctl: _Heads) -> He
 
 
 @router.put(
-    "/{sensor_id}/follow",
+    "/api/sensors/{sensor_id}/follow",
     response_model=HeadOut,
     dependencies=OPERATOR,
     responses=error_responses(401, 404, 409, 422, 502),
@@ -160,7 +175,7 @@ async def follow(sensor_id: str, body: FollowIn, state: StateDep, ctl: _Heads) -
 
 
 @router.delete(
-    "/{sensor_id}/follow",
+    "/api/sensors/{sensor_id}/follow",
     response_model=HeadOut,
     dependencies=OPERATOR,
     responses=error_responses(401, 404, 409, 502),

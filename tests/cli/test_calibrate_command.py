@@ -322,3 +322,29 @@ def test_prior_position_in_utm_pins_the_camera(capsys, site_parent, tmp_path):
     got = [doc["values"][k] for k in ("x", "y", "z")]
     assert got == pytest.approx(list(cam.position_enu), abs=0.01)
     assert doc["priors"]["x"][1] == 0.001 and doc["sigmas"]["z"] < 0.002
+
+
+def test_write_back_keeps_the_ptz_fields(capsys, site_parent, tmp_path):
+    """Calibrating a PTZ head rewrites its pose only: active, latency, gap, slew limits stay."""
+    import shutil
+
+    site_dir = tmp_path / "site"
+    shutil.copytree(site_parent / "site", site_dir)
+    manifest = site_dir / "site.json"
+    doc = json.loads(manifest.read_text())
+    ptz = {"active": True, "pose_latency_s": 0.08, "max_pose_gap_s": 0.3,
+           "slew_limits": {"pan_rate_deg_s": 45.0}}  # fmt: skip
+    doc["sensors"][0].update(ptz)
+    manifest.write_text(json.dumps(doc))
+    before = load_site(site_dir).sensor("cam1")
+    assert before.active and before.pose_latency_s == 0.08
+    gcps = write_gcps(site_dir, tmp_path / "g.csv")
+    status, _, err = run(capsys, "calibrate", "--site", site_dir, "--sensor", "cam1",
+                         "--gcps", gcps)  # fmt: skip
+    assert status == 0, err
+    fitted = load_site(site_dir).sensor("cam1")
+    assert (fitted.active, fitted.pose_latency_s, fitted.max_pose_gap_s) == (True, 0.08, 0.3)
+    assert fitted.slew_limits == {"pan_rate_deg_s": 45.0}
+    assert fitted.camera.azimuth_tilt_roll_deg() != before.camera.azimuth_tilt_roll_deg()
+    written = json.loads(manifest.read_text())["sensors"][0]
+    assert {k: written[k] for k in ptz} == ptz

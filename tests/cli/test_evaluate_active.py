@@ -28,7 +28,8 @@ def doc(sample_site_dir):
     argv = ["evaluate", "--site", str(sample_site_dir), "--scenario", "active-handoff"]
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
-        assert main([*argv, "--methods", "kalman", "multi-hypothesis-road", "--json"]) == 0
+        methods = ["--methods", "kalman", "multi-hypothesis-road", "--server-method", "none"]
+        assert main([*argv, *methods, "--json"]) == 0
     return json.loads(out.getvalue())
 
 
@@ -82,3 +83,43 @@ def test_bad_options_are_one_line(sample_site_dir, capsys, extra, needle):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and needle in err[0]
+
+
+def test_scenario_command_writes_the_pose_telemetry_beside_the_detections(
+    sample_site_dir, tmp_path, capsys
+):
+    """The files round-trip: read back, they geolocate every detection at its pose."""
+    from demtrack.core.geolocation.fix_builder import build_fixes
+    from demtrack.core.io.detections import read_detections
+    from demtrack.core.io.pose_io import read_poses
+    from demtrack.core.site.folder import load_site
+    from demtrack.samplesite.active_scenario import active_site
+
+    out = tmp_path / "run.csv"
+    argv = ["scenario", "--site", str(sample_site_dir), "--name", "active-handoff"]
+    assert main([*argv, "-o", str(out), "--start", "2026-12-01T14:30:00Z"]) == 0
+    assert "pose telemetry" in capsys.readouterr().out
+    poses_path = tmp_path / "run.poses.csv"
+    poses, report = read_poses(poses_path)
+    dets, _ = read_detections(out)
+    site = load_site(sample_site_dir)
+    assert report.n_skipped == 0 and set(poses) == set(site.sensors)
+    t0 = 1796135400.0  # 2026-12-01T14:30:00Z
+    for series in poses.values():
+        assert series.has_zoom and series.t_s[0] < t0 < series.t_s[-1]
+    assert min(d.t_s for d in dets) >= t0
+    fixes, fix_report = build_fixes(active_site(site, 0.08), dets, poses=poses)
+    assert fix_report.counts["no_pose"] == 0
+    assert len(fixes) >= 0.99 * len(dets)
+    # Without the telemetry an active sensor's detections are never placed at a stale pose.
+    _, blind = build_fixes(active_site(site, 0.08), dets)
+    assert blind.counts["no_pose"] == len(dets) and blind.n_fixes == 0
+
+
+def test_scenario_command_refuses_a_pose_file_type(sample_site_dir, tmp_path, capsys):
+    argv = ["scenario", "--site", str(sample_site_dir), "--name", "active-handoff"]
+    out = tmp_path / "run.jsonl"
+    assert main([*argv, "-o", str(out), "--poses", str(tmp_path / "p.txt")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "'.txt'" in err[0]
+    assert not any(tmp_path.iterdir())

@@ -13,7 +13,7 @@ from demtrack.core.io.times import parse_iso_time
 from demtrack.core.site.folder import load_site
 from demtrack.samplesite.scenarios import SCENARIOS, site_world, true_cameras
 from demtrack.samplesite.video_file import read_video_truth
-from demtrack.samplesite.video_render import FrameRenderer, RenderLook
+from demtrack.samplesite.video_render import FrameRenderer
 from demtrack.samplesite.video_scene import camera_scene
 
 START = "2026-12-01T14:30:00Z"

@@ -5,15 +5,12 @@ from __future__ import annotations
 
 import json
 import sys
-from fractions import Fraction
 from pathlib import Path
 
-import av
-import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "core" / "video"))
-from synth import START, Body, site_clip  # noqa: E402
+from synth import START, Body, klv_clip, site_clip  # noqa: E402
 
 from demtrack.cli import main  # noqa: E402
 from demtrack.commands.watch import batch_key  # noqa: E402
@@ -60,23 +57,12 @@ def test_batch_keys_are_deterministic():
     assert len(batch_key("c" * 60, "rtsp://" + "x" * 500, 10**9, "1" * 13)) <= 200
 
 
-def test_klv_poses_are_written_beside_the_detections(sample_site_dir, tmp_path):
-    pytest.importorskip("demtrack.core.camera.pose_series")
-    from demtrack.core.video.klv import UasDatalink, encode_uas_datalink
+def sensor_datalinks(site, n: int = 10):
+    from demtrack.core.video.klv import UasDatalink
 
-    site = load_site(sample_site_dir)
     lat, lon, h = site.frame.lat_deg, site.frame.lon_deg, site.frame.h_m
-    path = tmp_path / "fmv.ts"
-    c = av.open(str(path), "w", format="mpegts")
-    v = c.add_stream("libx264", rate=25)
-    v.width, v.height, v.pix_fmt = 1280, 720, "yuv420p"
-    data = c.add_data_stream("klv")
-    for k in range(10):
-        f = av.VideoFrame.from_ndarray(np.full((720, 1280, 3), 90, np.uint8), format="rgb24")
-        f.pts, f.time_base = k, Fraction(1, 25)
-        for p in v.encode(f):
-            c.mux(p)
-        d = UasDatalink(
+    return [
+        UasDatalink(
             t_s=START + k * 0.04,
             sensor_lat_deg=lat,
             sensor_lon_deg=lon,
@@ -85,12 +71,15 @@ def test_klv_poses_are_written_beside_the_detections(sample_site_dir, tmp_path):
             sensor_rel_az_deg=100.0 + k,
             sensor_rel_el_deg=-10.0,
         )
-        pkt = av.Packet(encode_uas_datalink(d))
-        pkt.stream, pkt.pts, pkt.dts, pkt.time_base = data, k * 3600, k * 3600, Fraction(1, 90000)
-        c.mux(pkt)
-    for p in v.encode():
-        c.mux(p)
-    c.close()
+        for k in range(n)
+    ]
+
+
+def test_klv_poses_are_written_beside_the_detections(sample_site_dir, tmp_path):
+    from demtrack.core.io.pose_io import read_poses
+
+    site = load_site(sample_site_dir)
+    path = klv_clip(tmp_path / "fmv.ts", sensor_datalinks(site))
     out = tmp_path / "d.jsonl"
     args = ["watch", "--site", str(sample_site_dir), "--sensor", "cam1", "--source", str(path)]
     assert main([*args, "--start", "2026-11-18T09:46:40Z", "-o", str(out), "--quiet"]) == 0
@@ -98,6 +87,12 @@ def test_klv_poses_are_written_beside_the_detections(sample_site_dir, tmp_path):
     assert [p["pan_deg"] for p in poses] == pytest.approx([100.0 + k for k in range(10)], abs=1e-6)
     assert all(p["tilt_deg"] == pytest.approx(-10.0, abs=1e-6) for p in poses)
     assert [p["t"] for p in poses] == pytest.approx([START + k * 0.04 for k in range(10)], abs=1e-6)
+    # the file is a pose telemetry file demtrack reads (core.io.pose_io)
+    series, report = read_poses(tmp_path / "d.poses.jsonl", sensors={"cam1"})
+    assert report.n_records == 10 and len(series["cam1"].samples()) == 10
+    # MSL + the site's geoid N = ellipsoidal; 30 m above the anchor's orthometric height
+    n_m = float(site.geoid.undulation_m(site.frame.lat_deg, site.frame.lon_deg))
+    assert poses[0]["u_m"] == pytest.approx(30.0 + n_m, abs=0.31)
 
 
 @pytest.mark.parametrize(

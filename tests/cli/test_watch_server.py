@@ -107,3 +107,36 @@ def test_watch_survives_a_server_restart_without_loss_or_duplicates(sample_site_
     assert len(got) == len(want)  # nothing lost, nothing twice
     assert sorted((d["t"], tuple(d["bbox"]), d["class"]) for d in got) == want
     assert f"{len(want)} detections to {url}" in out
+
+
+def test_watch_posts_klv_poses_to_the_sensor(sample_site_dir, tmp_path):
+    from synth import klv_clip
+    from test_watch_command import sensor_datalinks
+
+    site = load_site(sample_site_dir)
+    path = klv_clip(tmp_path / "fmv.ts", sensor_datalinks(site))
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    server = start_server(sample_site_dir, tmp_path / "db.sqlite3", port)
+    try:
+        watch = [sys.executable, "-m", "demtrack.cli", "watch", "--site", str(sample_site_dir)]
+        watch += ["--sensor", "cam1", "--source", str(path), "--start", "2026-11-18T09:46:40Z"]
+        run = subprocess.run(
+            [*watch, "--server", url, "--token", TOKEN, "--quiet"],
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+        assert run.returncode == 0, run.stderr
+        assert "10 poses" in run.stdout
+        # sent again: the same batch keys, nothing stored twice
+        subprocess.run([*watch, "--server", url, "--token", TOKEN, "--quiet"], check=True,
+                       capture_output=True, timeout=300)  # fmt: skip
+        with httpx.Client(base_url=url, headers=AUTH, timeout=10) as c:
+            poses = c.get("/api/sensors/cam1/poses", params={"format": "json"}).json()
+    finally:
+        server.kill()
+        server.wait(10)
+    rows = poses if isinstance(poses, list) else poses.get("poses", poses)
+    assert len(rows) == 10
+    assert sorted(r["pan_deg"] for r in rows) == pytest.approx([100.0 + k for k in range(10)])

@@ -183,3 +183,21 @@ def test_detections_agree_with_the_telemetry_read_at_its_latency(site, active):
     assert np.median(right) < 5.0
     assert np.mean(right < 25.0) > 0.9
     assert np.median(wrong) > 2.0 * np.median(right)
+
+
+def test_heads_turn_within_their_own_slew_limits(active, site):
+    """The reported pan rates (5-sample means, so the 0.05 deg noise averages out) never
+    pass each head's limit (the mast head's 45 deg/s is not the others' 60); a slew
+    reaches it."""
+    peaks = []
+    for sid, series in active.poses.items():
+        samples = series.samples()
+        t = np.array([p.t_s for p in samples])
+        pan = np.degrees(np.unwrap(np.radians([p.pan_deg for p in samples])))
+        rate = np.convolve(np.diff(pan) / np.diff(t), np.ones(5) / 5, "valid")
+        limit = _limits(site.sensors[sid]).pan_rate_deg_s
+        assert np.abs(rate).max() <= limit + 2.0
+        peaks.append(np.abs(rate).max() / limit)
+    assert max(peaks) > 0.9
+    fastest = {sid: _limits(site.sensors[sid]).pan_rate_deg_s for sid in site.sensors}
+    assert len(set(fastest.values())) == 2

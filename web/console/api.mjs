@@ -72,6 +72,11 @@ export async function putJSON(path, body, { signal } = {}) {
   return sendJSON("PUT", path, body, signal);
 }
 
+export async function deleteJSON(path, { signal } = {}) {
+  const resp = await fetch(path, { method: "DELETE", headers: headers(), signal });
+  return (await check(resp, path)).json();
+}
+
 async function sendJSON(method, path, body, signal) {
   const resp = await fetch(path, {
     method,

@@ -251,7 +251,7 @@ export function fitCameras(root, panels) {
       let w = cellW;
       for (const p of list) {
         const aspect = p.sensor.width_px / p.sensor.height_px;
-        const cellH = (H - gap * (rows - 1)) / rows - head - 2;
+        const cellH = (H - gap * (rows - 1)) / rows - head - (p.extraHeight || 0) - 2; // ptz.mjs strip
         w = Math.min(w, cellH * aspect);
       }
       if (w > best.w + 1) best = { cols, w };

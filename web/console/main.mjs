@@ -24,6 +24,7 @@ import { drawLists } from "./lists.mjs";
 import { SiteMap } from "./map.mjs";
 import { loadMarkers } from "./markers.mjs";
 import { onMessage, onReset } from "./messages.mjs";
+import { installPtz } from "./ptz.mjs";
 import { onSelectionChange } from "./selection.mjs";
 import { buildFilters, buildLayerList } from "./sidebar.mjs";
 import { store, timeline, ui } from "./state.mjs";
@@ -102,7 +103,8 @@ async function boot() {
     }).catch(() => {})
     : Promise.resolve();
   const markers = loadMarkers(); // stored markers (markers.mjs); the stream keeps them current
-  await Promise.all([ortho, relief, roads, images, tracks, events, markers]);
+  const heads = installPtz(); // the active heads' strips in the camera panels (ptz.mjs)
+  await Promise.all([ortho, relief, roads, images, tracks, events, markers, heads]);
   if (!store.events.length) { // no event log on this server (or none yet)
     eventsFromTracks(store.tracks.values()).forEach((e) => store.applyEvent(e));
   }

@@ -13,12 +13,13 @@ from scipy.spatial.transform import Rotation, Slerp
 from demtrack.core.camera.attitude import (
     quat_from_rotation,
     rotation_from_quat,
+    rotations_from_azimuth_tilt_roll,
     rotations_from_ypr,
     slerp,
     ypr_from_rotation,
 )
 from demtrack.core.camera.pantilt import PanTiltHead
-from demtrack.core.camera.pinhole import Intrinsics
+from demtrack.core.camera.pinhole import Intrinsics, rotation_from_azimuth_tilt_roll
 from demtrack.core.camera.pose_series import PoseSample, PoseSeries, camera_at
 from demtrack.core.camera.zoom_lens import intrinsics_for_hfov
 from demtrack.core.errors import CameraError, PoseError
@@ -99,6 +100,19 @@ def test_slerp_and_quaternions_against_scipy():
     for i in range(49):
         want = Slerp([0.0, 1.0], r[i : i + 2])([a[i]]).as_matrix()[0]
         np.testing.assert_allclose(got[i], want, atol=1e-12)
+
+
+def test_batched_rotations_are_the_scalar_ones():
+    rng = np.random.default_rng(5)
+    az, tilt, roll = (
+        rng.uniform(-400, 400, 40),
+        rng.uniform(-90, 90, 40),
+        rng.uniform(-180, 180, 40),
+    )
+    got = rotations_from_azimuth_tilt_roll(az, tilt, roll)
+    for k in range(40):
+        want = rotation_from_azimuth_tilt_roll(az[k], tilt[k], roll[k])
+        np.testing.assert_allclose(got[k], want, atol=2e-16 * 8)
 
 
 def test_ypr_round_trip_and_its_meaning():

@@ -27,12 +27,12 @@ HEAD_ENU = (0.0, -150.0, 20.0)
 NO_OFFSET = {"vehicle": 0.0, "human": 0.0}
 
 
-def flat_site(root, *, active=True, zoom=None, latency=0.0):
+def flat_site(root, *, active=True, zoom=None, latency=0.0, intr=INTR):
     root.mkdir(parents=True, exist_ok=True)
     grid = GridSpec(-200.0, 200.0, 2.0, 200, 200)
     Dem(grid, np.zeros(grid.shape, np.float32)).write(root / "dem.tif")
     ptz = Sensor(
-        "ptz", "ptz", PanTiltHead(HEAD_ENU, 10.0, INTR), 0.0, -7.0,
+        "ptz", "ptz", PanTiltHead(HEAD_ENU, 10.0, intr), 0.0, -7.0,
         active=active, zoom=zoom, pose_latency_s=latency,
     )  # fmt: skip
     fixed = Sensor("fixed", "fixed", PanTiltHead((30.0, -160.0, 15.0), 0.0, INTR), 0.0, -8.0)
@@ -83,6 +83,13 @@ def test_a_sweeping_head_gives_the_ground_point_of_each_moment(tmp_path):
     )
     err = [np.linalg.norm(a.hits_enu[0] - b.hits_enu[0]) for a, b in zip(stale, fixes, strict=True)]
     assert min(err) > 5.0
+    # A sensor not marked active but given a series is geolocated at its poses too.
+    passive = replace(
+        site, sensors={**site.sensors, "ptz": replace(site.sensors["ptz"], active=False)}
+    )
+    again, _ = build_fixes(passive, dets, poses={"ptz": series}, foot_offset_m=NO_OFFSET)
+    for a, b in zip(again, fixes, strict=True):
+        np.testing.assert_array_equal(a.hits_enu, b.hits_enu)
 
 
 def test_detections_without_a_close_pose_are_no_pose(tmp_path):
@@ -178,3 +185,15 @@ def test_the_sensors_gap_setting(tmp_path, gap):
     )
     _, report = build_fixes(site, detections_between_samples([T0 + 0.03]), poses={"ptz": sweep()})
     assert report.counts["no_pose"] == (1 if gap < 0.03 else 0)
+
+
+def test_a_zoom_the_lens_cannot_invert_at_a_pixel_is_no_pose(tmp_path):
+    strong = Intrinsics(800.0, 800.0, 319.5, 239.5, 640, 480, k1=-0.3)
+    site = flat_site(tmp_path / "s", intr=strong)
+    series = PoseSeries.from_arrays([T0, T0 + 1.0], [0.0, 0.0], [-30.0, -30.0], hfov_deg=[120, 120])
+    dets = [
+        Detection(T0 + 0.1, "ptz", (300.0, 200.0, 340.0, 260.0), "vehicle"),  # near the axis
+        Detection(T0 + 0.2, "ptz", (0.0, 400.0, 10.0, 479.0), "vehicle"),  # a far corner
+    ]
+    fixes, report = build_fixes(site, dets, poses={"ptz": series})
+    assert [f.detection_index for f in fixes] == [0] and report.counts["no_pose"] == 1

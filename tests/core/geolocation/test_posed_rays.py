@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from demtrack.core.camera.pinhole import Camera, Intrinsics
+from demtrack.core.camera.zoom_lens import intrinsics_for_hfov
 from demtrack.core.errors import CameraError
 from demtrack.core.geolocation.geolocate import _pixel_perturbations
 from demtrack.core.geolocation.posed_rays import PosedView, posed_view_rays
@@ -55,3 +56,37 @@ def test_shapes_and_pixels_are_checked():
     view = PosedView(INTR, np.array([700.0]), np.array([0.0]), np.eye(3)[None], np.zeros((1, 3)))
     with pytest.raises(CameraError, match="outside"):
         posed_view_rays(view, 1.0)
+
+
+def test_per_pixel_focal_lengths_are_the_ideal_zoom_per_pixel():
+    rng = np.random.default_rng(4)
+    k = 30
+    hfov = rng.uniform(10.0, 45.0, k)
+    u, v = rng.uniform(-0.5, 639.5, k), rng.uniform(-0.5, 479.5, k)
+    rot = np.stack(
+        [Camera.from_azimuth_tilt_roll(INTR, [0, 0, 5], a, -9.0).R_world_cam for a in 3 * hfov]
+    )
+    pos = rng.normal(0, 10, (k, 3))
+    lenses = [intrinsics_for_hfov(INTR, h) for h in hfov]
+    fx = np.array([lens.fx for lens in lenses])
+    fy = np.array([lens.fy for lens in lenses])
+    o, d, axes, sig = posed_view_rays(PosedView(INTR, u, v, rot, pos, fx, fy), 1.0)
+    for i, lens in enumerate(lenses):
+        one = PosedView(lens, u[i : i + 1], v[i : i + 1], rot[i : i + 1], pos[i : i + 1])
+        o1, d1, a1, s1 = posed_view_rays(one, 1.0)
+        np.testing.assert_allclose(d[i], d1[0], atol=1e-14)
+        np.testing.assert_allclose(axes[i], a1[0], atol=1e-13)
+        np.testing.assert_allclose(sig[i], s1[0], rtol=1e-12)
+
+
+def test_a_zoom_wider_than_the_lens_can_invert_gives_nan_rays():
+    strong = Intrinsics(800.0, 800.0, 319.5, 239.5, 640, 480, k1=-0.3)
+    fx = np.full(2, 320.0 / np.tan(np.radians(60.0)))  # hfov 120 deg: past the fold
+    with pytest.raises(CameraError, match="not invertible"):
+        intrinsics_for_hfov(strong, 120.0)
+    view = PosedView(
+        strong, np.array([320.0, 0.0]), np.array([240.0, 0.0]), np.repeat(np.eye(3)[None], 2, 0),
+        np.zeros((2, 3)), fx, fx,
+    )  # fmt: skip
+    _, d, _, _ = posed_view_rays(view, 1.0)
+    assert np.isfinite(d[0]).all() and np.isnan(d[1]).all()

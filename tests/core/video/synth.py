@@ -241,3 +241,28 @@ def site_clip(path, site, sensor_id, bodies, *, n_frames=60, fps=25, seed=0, noi
         c.mux(pkt)
     c.close()
     return clip
+
+
+def klv_clip(path, datalinks, *, size=(1280, 720), fps=25) -> Path:
+    """An MPEG-TS of plain grey H.264 frames with one ST 0601 packet per frame (PTS alike)."""
+    from demtrack.core.video.klv import encode_uas_datalink
+
+    w, h = size
+    c = av.open(str(path), "w", format="mpegts")
+    v = c.add_stream("libx264", rate=fps)
+    v.width, v.height, v.pix_fmt = w, h, "yuv420p"
+    data = c.add_data_stream("klv")
+    for k, d in enumerate(datalinks):
+        f = av.VideoFrame.from_ndarray(np.full((h, w, 3), 90, np.uint8), format="rgb24")
+        f.pts, f.time_base = k, Fraction(1, fps)
+        for p in v.encode(f):
+            c.mux(p)
+        pkt = av.Packet(encode_uas_datalink(d))
+        pkt.stream = data
+        pkt.pts = pkt.dts = k * (90000 // fps)
+        pkt.time_base = Fraction(1, 90000)
+        c.mux(pkt)
+    for p in v.encode():
+        c.mux(p)
+    c.close()
+    return Path(path)

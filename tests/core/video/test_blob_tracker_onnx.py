@@ -67,8 +67,10 @@ def region_model(path, x0: int, y0: int, x1: int, y1: int, threshold: float = 0.
         "cls": np.array([0], np.int64),
         "shape1": np.array([1], np.int64),
     }
-    inits = [helper.make_tensor(k, TensorProto.FLOAT if v.dtype == np.float32 else TensorProto.INT64,
-                                v.shape, v.ravel().tolist()) for k, v in consts.items()]  # fmt: skip
+    inits = []
+    for k, v in consts.items():
+        kind = TensorProto.FLOAT if v.dtype == np.float32 else TensorProto.INT64
+        inits.append(helper.make_tensor(k, kind, v.shape, v.ravel().tolist()))
     nodes = [
         node("Slice", ["image", "starts", "ends", "axes"], ["patch"]),
         node("ReduceMean", ["patch"], ["mean"], keepdims=0),
