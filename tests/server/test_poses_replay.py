@@ -138,7 +138,8 @@ def test_the_consoles_live_replay_of_an_active_scenario_posts_its_poses(client_f
     assert replay.error is None and not replay.running
     counts = c.get("/api/status", headers=AUTH).json()["counts"]
     assert counts["detections"] > 100 and counts["poses_stored"] > counts["detections"]
-    assert counts["no_pose"] == 0 and counts["pose_waiting"] == 0
-    assert counts["fixes"] == counts["detections"]
+    # the newest few wait for poses after them, which the cut-off replay never sends
+    assert counts["no_pose"] == 0 and counts["pose_waiting"] <= 10
+    assert counts["fixes"] + counts["pose_waiting"] == counts["detections"]
     sensors = c.get("/api/sensors", headers=AUTH).json()
     assert all(s["telemetry"] and s["pose"] is not None for s in sensors)
