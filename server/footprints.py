@@ -58,8 +58,12 @@ def footprint(
     frame: LocalFrame,
     per_edge: int = 16,
     max_range_m: float = 5000.0,
+    decimals: int | None = None,
 ) -> dict[str, Any]:
     """The ground footprint of ``camera``.
+
+    ``decimals``: round the ENU points to that many decimals of a metre and lon/lat to
+    five more of a degree (None: full precision), for footprints sent often.
 
     Returns
     -------
@@ -86,6 +90,8 @@ def footprint(
     ring: list[list[float]] = []
     if len(enu):
         lat, lon, _ = (np.atleast_1d(a) for a in frame.to_geodetic(*enu.T))
+        if decimals is not None:
+            enu, lon, lat = enu.round(decimals), lon.round(decimals + 5), lat.round(decimals + 5)
         ring = [[float(a), float(b)] for a, b in zip(lon, lat, strict=True)]
         ring.append(ring[0])
     return {

@@ -171,8 +171,9 @@ class SensorStatusMessage(_Model):
 class SensorPoseMessage(_Model):
     """A sensor's newest pose telemetry and its ground footprint at that pose.
 
-    Sent after the batch that stored it, at most about ten a second per sensor (always
-    the newest pose: one held back by the rate limit goes out when the interval ends).
+    Sent after the batch that stored it, at most once per ``pose_message_interval_s``
+    (0.2 s) per sensor (always the newest pose: one held back by the rate limit goes out
+    when the interval ends).
     Angles in degrees: ``pan_deg`` clockwise from the mount's zero, ``tilt_deg`` up from
     level, ``roll_deg`` about the optical axis, ``hfov_deg`` the horizontal field of view
     (null: the calibrated lens). ``footprint``: as ``GET /api/sensors``'s (``enu``

@@ -177,7 +177,7 @@ class Settings(BaseSettings):
     viser_port: int = Field(default=8080, ge=0, le=65535)
     scene3d_rays: int = Field(default=40, ge=1, le=1000)
     reorder_lag_s: float = Field(default=0.5, ge=0, le=60, allow_inf_nan=False)
-    pose_message_interval_s: float = Field(default=0.1, ge=0, le=60, allow_inf_nan=False)
+    pose_message_interval_s: float = Field(default=0.2, ge=0, le=60, allow_inf_nan=False)
     track_retain_s: float = Field(default=600.0, ge=0, allow_inf_nan=False)
     events: bool = True
     events_every_s: float = Field(default=1.0, gt=0, le=3600, allow_inf_nan=False)

@@ -128,7 +128,7 @@ class Pipeline:
         events: LiveEventParams | None = None,
         zones_path: Any = None,
         retain_ended_s: float = 600.0,
-        pose_interval_s: float = 0.1,
+        pose_interval_s: float = 0.2,
     ) -> None:
         self.site = site
         self.store = store

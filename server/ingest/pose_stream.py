@@ -1,13 +1,14 @@
-"""``sensor_pose`` messages: each sensor's newest pose, at most ``1 / interval_s`` a second.
+"""``sensor_pose`` messages: each sensor's newest pose, at most once per ``interval_s``.
 
-A head may report poses at 25 Hz or more; consoles need no more than about ten a second to
-move a footprint smoothly. After each committed batch the pipeline asks
-:meth:`PoseAnnouncer.due` for the sensors whose poses changed: a sensor last announced at
-least ``interval_s`` ago (wall clock) is announced now, with its newest pose; the others
-are marked and :meth:`PoseAnnouncer.flush` announces their newest pose once their interval
-has passed (the pipeline arms a timer for :meth:`PoseAnnouncer.next_flush_s`). So the
-newest pose always goes out, a little late at worst, and never more than one message per
-sensor per interval. The messages are stream messages: stored with a ``seq``, resumed.
+A head may report poses at 25 Hz or more; consoles need a few a second to move a
+footprint (the default interval is 0.2 s), and every message is stored in the event log.
+After each committed batch the pipeline asks :meth:`PoseAnnouncer.due` for the sensors
+whose poses changed: a sensor last announced at least ``interval_s`` ago (wall clock) is
+announced now, with its newest pose; the others are marked and
+:meth:`PoseAnnouncer.flush` announces their newest pose once their interval has passed
+(the pipeline arms a timer for :meth:`PoseAnnouncer.next_flush_s`). So the newest pose
+always goes out, a little late at worst, and never more than one message per sensor per
+interval. The messages are stream messages: stored with a ``seq``, resumed.
 """
 
 from __future__ import annotations

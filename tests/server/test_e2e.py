@@ -235,7 +235,8 @@ def test_sigkill_with_pose_telemetry_restarts_to_the_same_poses_fixes_tracks(
     posts = _pose_feed(cam.pan_deg, cam.tilt_deg)
     db = tmp_path / "console.sqlite3"
     acked: list[int] = []
-    proc, url = start(site_dir, db)
+    # the poses are the test's own: no simulated head reports cam1's
+    proc, url = start(site_dir, db, DEMTRACK_HEADS="off")
 
     def feed() -> None:
         with httpx.Client(base_url=url, headers=AUTH, timeout=10) as c:
@@ -256,7 +257,7 @@ def test_sigkill_with_pose_telemetry_restarts_to_the_same_poses_fixes_tracks(
         proc.wait(10)
         t.join(20)
         assert 12 <= len(acked) < len(posts), "the kill should land mid-stream"
-        proc, url = start(site_dir, db)
+        proc, url = start(site_dir, db, DEMTRACK_HEADS="off")
         with httpx.Client(base_url=url, headers=AUTH, timeout=10) as c:
             for path, body in posts:  # the feed again from the start: resending is harmless
                 assert c.post(path, json=body).status_code == 200
@@ -274,7 +275,7 @@ def test_sigkill_with_pose_telemetry_restarts_to_the_same_poses_fixes_tracks(
     fixes = _fix_rows(db)
     assert sum(1 for _, s, _ in fixes if s == "fix") > 60
     (tmp_path / "ref").mkdir()
-    with TestClient(make_app(site_dir, tmp_path / "ref")) as ref:
+    with TestClient(make_app(site_dir, tmp_path / "ref", heads="off")) as ref:
         for path, body in posts:
             assert ref.post(path, headers=AUTH, json=body).status_code == 200
         assert ref.get("/api/sensors/cam1/poses", headers=AUTH).json()["poses"] == poses

@@ -76,7 +76,8 @@ def test_the_pose_between_two_samples_is_interpolated(site, tmp_path):
     p0, t0 = cam.pan_deg - 2.0, cam.tilt_deg
     p, _ = pipeline(site, tmp_path / "a.sqlite3")
     p.ingest_poses("cam1", [PoseSample(10.0, p0, t0), PoseSample(10.1, p0 + 1.0, t0 - 0.4)])
-    rec = walk(n=1, t0=10.025)
+    # the frame's pose is the telemetry's at t + pose_latency_s: a quarter of the way
+    rec = walk(n=1, t0=10.025 - cam.pose_latency_s)
     p.ingest(rec + walk(sensor="cam2", n=1, t0=11.0))  # cam2 moves the horizon on
     (body,) = [b for b in fix_rows(p.store).values() if b["sensor"] == "cam1"]
     oracle, _ = pipeline(posed_site(site, "cam1", p0 + 0.25, t0 - 0.1), tmp_path / "o.sqlite3")
@@ -116,7 +117,7 @@ def test_a_detection_waits_for_the_pose_that_comes_after_it(site, tmp_path):
         b.ingest([d])
         if k == 0:
             assert len(b.pose_book.waiting) == 1 and not fix_rows(b.store)  # stored, waiting
-        upto = int(d["t"] / 0.1) + 2  # the samples up to just after it
+        upto = int((d["t"] + cam.pose_latency_s) / 0.1) + 2  # up to just after its pose
         b.ingest_poses("cam1", samples[sent:upto])
         sent = upto
         assert sorted(fix_rows(b.store)) == list(range(1, k + 2))  # settled at once

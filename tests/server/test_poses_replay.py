@@ -119,3 +119,27 @@ def test_an_active_scenarios_replay_geolocates_at_the_heads_poses(sample_site_di
     assert np.median(err_posed) < 2.0, np.median(err_posed)
     err_fixed = _horizontal_error_m(fixed.tracks, sc.truths)
     assert len(err_fixed) == 0 or np.median(err_fixed) > 2 * np.median(err_posed)
+
+
+def test_the_consoles_live_replay_of_an_active_scenario_posts_its_poses(client_factory):
+    """``demtrack serve --replay active-handoff``'s path: the replay posts the heads' poses
+    ahead of the detections, so every detection is geolocated at its head's pose."""
+    import time
+
+    from server_helpers import AUTH
+
+    c = client_factory(
+        replay=["active-handoff"], replay_speed=5.0, replay_loop=False, replay_duration_s=20.0
+    )
+    replay = c.app.state.replay
+    deadline = time.monotonic() + 120
+    while (replay.running or replay.t_s is None) and time.monotonic() < deadline:
+        time.sleep(0.5)
+    assert replay.error is None and not replay.running
+    counts = c.get("/api/status", headers=AUTH).json()["counts"]
+    assert counts["detections"] > 100 and counts["poses_stored"] > counts["detections"]
+    # the newest few wait for poses after them, which the cut-off replay never sends
+    assert counts["no_pose"] == 0 and counts["pose_waiting"] <= 10
+    assert counts["fixes"] + counts["pose_waiting"] == counts["detections"]
+    sensors = c.get("/api/sensors", headers=AUTH).json()
+    assert all(s["telemetry"] and s["pose"] is not None for s in sensors)

@@ -391,7 +391,7 @@ export class SiteMap {
     // The field of view's edges, camera to far corners: the footprint's second style.
     return [area, new ol.style.Style({
       geometry: new ol.geom.LineString(wedge),
-      stroke: stroke(withAlpha(c, 0.8), 1, [2, 4]),
+      stroke: stroke(withAlpha(c, 0.95), 1.5, [4, 4]),
     })];
   }
 
