@@ -49,7 +49,7 @@ from .frame_book import FrameBook
 from .jpeg import encode_jpeg
 from .source import VideoClip
 
-__all__ = ["LEAD_FRAMES", "VideoItem", "VideoReplay", "playlist"]
+__all__ = ["LEAD_FRAMES", "FrameKeeper", "VideoItem", "VideoReplay", "playlist"]
 
 log = logging.getLogger("demtrack.server")
 
@@ -82,17 +82,24 @@ def playlist(spans: Sequence[tuple[float, float]], gap_s: float) -> tuple[list[f
     return offsets, at
 
 
-class _KeepFrames:
-    """A reader that remembers its last frames by index (for the lagging detections)."""
+class FrameKeeper:
+    """A reader that remembers its last ``keep`` frames by index.
 
-    def __init__(self, reader: VideoReader, keep: int) -> None:
+    :class:`~demtrack.core.video.pipeline.VideoDetections` releases a frame's detections
+    a few frames after decoding it; this finds the frame they belong to. Reads KLV too
+    when ``klv`` (``demtrack watch``); the replay reads none.
+    """
+
+    def __init__(self, reader: VideoReader, keep: int, *, klv: bool = False) -> None:
         self.reader = reader
         self.frames: dict[int, Frame] = {}
         self._order: deque[int] = deque()
         self.keep = keep
+        self.klv = klv
 
     def items(self) -> Iterator[Any]:
-        for item in self.reader.items(klv=False):
+        """The reader's items, remembering the frames."""
+        for item in self.reader.items(klv=self.klv):
             if isinstance(item, Frame):
                 self.frames[item.index] = item
                 self._order.append(item.index)
@@ -298,7 +305,7 @@ class VideoReplay:
             )
         mask = load_mask(str(mask_path), reader.size) if mask_path.is_file() else None
         det = make_detector(self.detector, reader.size, fps=reader.fps, mask=mask)
-        keep = _KeepFrames(reader, keep=64)
+        keep = FrameKeeper(reader, keep=64)
         pipe = VideoDetections(keep, det, clip.sensor, classifier)  # type: ignore[arg-type]
         base = n * LOCAL_ID_STRIDE
         for res in pipe.results():
