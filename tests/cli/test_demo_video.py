@@ -135,5 +135,7 @@ def test_demo_from_video_tracks_the_car_and_serves_frames(sample_site_dir, tmp_p
             continue
         tau = np.array([p["t_s"] for p in pts]) - START_S - LEAD_IN_S
         err = np.hypot(*(np.array([[p["e_m"], p["n_m"]] for p in pts]) - truth.at(tau)[:, :2]).T)
-        best = min(best, float(np.nanmedian(err)))
+        err = err[np.isfinite(err)]  # NaN: before the car starts or after the truth ends
+        if len(err) >= 10:
+            best = min(best, float(np.median(err)))
     assert best < 5.0, f"no track within 5 m of the car (best median error {best:.1f} m)"

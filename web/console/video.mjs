@@ -8,8 +8,8 @@
 // camera's still (an <img> of a blob: URL: the token stays in the request headers, never in an
 // image URL or a server log), and the boxes and track ids are drawn over it as over the still,
 // but at the frame's own time (frame.mjs reads `panel.videoT`, `panel.videoWindowS`), so a box
-// sits on the object it belongs to. The header says "video HH:MM:SS.s UTC" with the frame's
-// clock time; when no new frame came for STALE_MS (5 s), or the timeline is not live (the
+// sits on the object it belongs to. A label in the picture's corner says "video HH:MM:SS.s
+// UTC" with the frame's clock time; when no new frame came for STALE_MS (5 s), or the timeline is not live (the
 // frame is the newest, not the moment shown), the panel falls back to the still and says
 // "still".
 //
@@ -45,9 +45,14 @@ class Feed {
     this.img = el("img", { class: "cam-video", alt: `${panel.sensor.id} video`, draggable: "false" });
     Object.assign(this.img.style, { position: "absolute", inset: "0", width: "100%", height: "100%", display: "none" });
     panel.canvas.before(this.img);
-    this.label = el("span", { class: "cam-feed muted", text: "still", title: "no live video from this camera" });
-    Object.assign(this.label.style, { marginLeft: "8px", fontSize: "11px", fontVariantNumeric: "tabular-nums" });
-    panel.status.before(this.label);
+    // In the picture's corner, as a camera's on-screen clock (the header has no room left).
+    this.label = el("span", { class: "cam-feed", text: "still", title: "no live video from this camera" });
+    Object.assign(this.label.style, {
+      position: "absolute", left: "4px", bottom: "4px", padding: "1px 5px", borderRadius: "3px",
+      background: "rgba(0,0,0,0.6)", color: "#fff", font: "11px system-ui, sans-serif",
+      fontVariantNumeric: "tabular-nums", pointerEvents: "none",
+    });
+    panel.wrap.append(this.label);
     this.state = null;
     this.show();
   }
@@ -91,11 +96,11 @@ class Feed {
     if (fresh) {
       this.label.textContent = `video ${fmtClock(this.t_s, { digits: 1 })} ${zoneLabel(this.t_s)}`;
       this.label.title = "live video: the newest frame from the camera, with its capture time";
-      this.label.classList.remove("muted");
+      this.label.style.opacity = "1";
     } else {
       this.label.textContent = "still";
       this.label.title = this.url ? "video stopped (no new frame for 5 s) or the timeline is not live: the camera's still" : "no live video from this camera: its still";
-      this.label.classList.add("muted");
+      this.label.style.opacity = "0.7";
     }
     if (state !== this.state || fresh) ui.dirty = true; // redraw the boxes at the frame's time
     this.state = state;
