@@ -19,9 +19,11 @@ The scenarios play one after another (a camera shows one video at a time), each 
 clips' first frame to their last, ``gap_s`` apart, looping. A scenario's time ``tau`` in
 loop ``k`` plays at ``t0_s + k * period + offset + (tau - t_from)``; local ids of each
 clip are offset (``clip * 100000``) so a later loop never continues an earlier one's
-blob track. When decoding and detecting cannot keep up, the player waits for the frames
-(its lateness is :attr:`VideoReplay.late_s`) and then moves its clock on, so the replay
-slows rather than bursts.
+blob track. A clip's frames before its ``detect_from_s`` (the sample videos' lead-in, the
+detector learning the scene) are shown but their detections are not sent. When decoding
+and detecting cannot keep up, the player waits for the frames (its lateness is
+:attr:`VideoReplay.late_s`) and then moves its clock on, so the replay slows rather than
+bursts.
 """
 
 from __future__ import annotations
@@ -311,8 +313,10 @@ class VideoReplay:
         for res in pipe.results():
             if res.index < 0:
                 continue
-            t = round(res.t_s - clip.scenario_start_s + shift, 6)
-            recs = tuple(_record(d, t, base) for d in res.detections)
+            tau = res.t_s - clip.scenario_start_s
+            t = round(tau + shift, 6)
+            warming = clip.detect_from_s is not None and tau < clip.detect_from_s - 1e-6
+            recs = () if warming else tuple(_record(d, t, base) for d in res.detections)
             yield t, recs, keep.frames.get(res.index)
             if self._stop.is_set():
                 return
