@@ -52,7 +52,7 @@ from .api import (
 from .api.deps import READER
 from .api.errors import error_responses, install_error_handlers
 from .cot.service import start_cot_sender
-from .heads.service import start_heads
+from .heads.service import check_heads, start_heads
 from .hub import Hub
 from .ingest.pipeline import Pipeline, Publisher, pipeline_options
 from .replay import Replay, scenario_stream, start_time_after
@@ -207,6 +207,7 @@ def check_startup(app: FastAPI) -> None:
     """
     settings: Settings = app.state.settings
     app.state.preloaded_site = load_site(settings.site)
+    check_heads(app.state.preloaded_site, settings)  # a bad head_adapter entry: one line
     path = settings.resolved_db_path
     try:
         Store(path).close()

@@ -165,7 +165,9 @@ class DetectionBatch(_Request):
     detection JSON Lines format). ``t`` is UNIX seconds UTC (or, with the batch's
     ``epoch``, seconds after it); ``"time": "2026-12-01T14:32:05.25Z"`` (ISO 8601 with a
     zone) may stand for ``t``. Records are checked one by one; bad ones (a time without
-    a zone among them) are skipped and counted by reason, the others stored.
+    a zone among them) are skipped and counted by reason, the others stored. A record
+    may carry ``pan_deg``, ``tilt_deg`` and ``hfov_deg``: its sensor's pose at ``t``,
+    stored as pose telemetry (``poses`` in the acknowledgement counts them).
     """
 
     batch_key: str | None = Field(

@@ -8,7 +8,9 @@ predicted place after an occlusion is still taken); pairs beyond the gate are no
 A blob nobody takes starts a track (birth); a track unmatched for ``max_missed_s`` ends
 (death). The class of a track is the **majority of its per-frame classes so far**,
 committed only after ``min_history`` frames (Lipton et al.'s temporal consistency), with
-clutter votes counted: a track that is mostly clutter is reported as clutter.
+clutter votes counted: a track that is mostly clutter is reported as clutter. A track
+is a moving object (``moved``) once it has travelled half a box diagonal from where it
+appeared: motion that goes nowhere (a tree crown in the wind) is not an object.
 """
 
 from __future__ import annotations
@@ -39,6 +41,8 @@ class BlobTrack:
     votes: Counter = field(default_factory=Counter)
     n_seen: int = 0
     scores: list[float] = field(default_factory=list)
+    origin_px: np.ndarray | None = None  # box centre when first seen
+    moved: bool = False  # has travelled ``travel`` box diagonals from its origin
 
     def predict(self, t_s: float) -> tuple[float, float, float, float]:
         """The box moved on by the velocity to ``t_s``."""
@@ -85,6 +89,10 @@ class BlobTracker:
         Largest centre distance, in box diagonals, of a match without overlap.
     velocity_gain : float
         Weight of a new velocity measurement in the smoothed velocity (0..1).
+    travel : float
+        A track counts as a moving object (``moved``) once its box centre has been this
+        many box diagonals (at least 3 px) from where it was first seen; a swaying tree
+        crown or a flickering shadow never gets there.
     """
 
     def __init__(
@@ -94,6 +102,7 @@ class BlobTracker:
         min_history: int = 5,
         gate: float = 1.0,
         velocity_gain: float = 0.3,
+        travel: float = 0.5,
     ) -> None:
         if not max_missed_s > 0:
             raise VideoError(f"max_missed_s must be positive, got {max_missed_s}")
@@ -103,6 +112,7 @@ class BlobTracker:
         self.min_history = int(min_history)
         self.gate = float(gate)
         self.velocity_gain = float(velocity_gain)
+        self.travel = float(travel)
         self.tracks: list[BlobTrack] = []
         self._ids = itertools.count(1)
 
@@ -157,6 +167,15 @@ class BlobTracker:
                     tr.velocity_px_s = (1 - g) * tr.velocity_px_s + g * v
                 tr.bbox, tr.t_s = blob.bbox, t_s
             tr.n_seen += 1
+            centre = _centre(blob.bbox)
+            if tr.origin_px is None:
+                tr.origin_px = centre
+            elif not tr.moved:
+                b = blob.bbox
+                diag = float(np.hypot(b[2] - b[0], b[3] - b[1]))
+                tr.moved = float(np.linalg.norm(centre - tr.origin_px)) >= max(
+                    self.travel * diag, 3.0
+                )
             tr.votes[classes[j]] += 1
             tr.scores.append(float(scores[j]))
             tr.scores = tr.scores[-50:]

@@ -5,7 +5,8 @@ geolocated foot point and votes the class over the blob's track. Output runs a f
 ``lag`` frames behind the input (``min_history`` of the tracker): a frame's detections
 are released once the tracks have that many more frames of history, so each carries the
 majority class of its track including its near future, a track too short to commit
-(a flicker) never comes out, and records still leave in time order. Clutter is dropped.
+(a flicker) never comes out, and records still leave in time order. Clutter is dropped
+(and, with ``require_travel``, a track that has not yet travelled in the image).
 
 Detectors by name (:func:`make_detector`): ``vsam`` (the default,
 :class:`~.detector.VsamDetector`), ``mog2``, ``knn`` (OpenCV), ``onnx:PATH`` (a
@@ -104,6 +105,9 @@ class VideoDetections:
     classifier : BlobClassifier, optional
         Default: image cues only (no geometry).
     tracker : BlobTracker, optional
+    require_travel : bool
+        Report a track only once it has travelled (``BlobTrack.moved``); off by default,
+        as an object moving along the line of sight hardly travels in the image.
     """
 
     def __init__(
@@ -113,8 +117,11 @@ class VideoDetections:
         sensor: str,
         classifier: BlobClassifier | None = None,
         tracker: BlobTracker | None = None,
+        *,
+        require_travel: bool = False,
     ) -> None:
         self.reader = reader
+        self.require_travel = bool(require_travel)
         self.detector = detector
         self.sensor = sensor
         self.classifier = classifier or BlobClassifier()
@@ -142,7 +149,7 @@ class VideoDetections:
         dets = []
         for tb, track in zip(tracked, tracks, strict=True):
             cls = track.voted_class(self.tracker.min_history)
-            if cls is None or cls == CLUTTER:
+            if cls is None or cls == CLUTTER or (self.require_travel and not track.moved):
                 continue
             dets.append(
                 Detection(t_s, self.sensor, tb.blob.bbox, cls, round(tb.score, 3), tb.local_id)

@@ -218,6 +218,8 @@ def _run(args: argparse.Namespace) -> int:
         overrides.update(scene3d=True, viser_host=args.host, viser_port=args.viser_port)
     if args.cot is not None:
         overrides["cot_url"] = args.cot
+    if args.heads is not None:
+        overrides["heads"] = args.heads
     app = create_app(scenarios=scenario_source(live), **overrides)  # the sample's scenarios
     check_startup(app)  # a broken site or database: one line and exit 2, not a traceback
     settings = app.state.settings
@@ -273,6 +275,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="URL",
         help="send tracks and markers as Cursor-on-Target to a TAK peer: udp://239.2.3.1:6969"
         " (multicast; ?ttl=N), udp://HOST:PORT or tcp://HOST:8087 (default: $DEMTRACK_COT_URL)",
+    )
+    p.add_argument(
+        "--heads",
+        choices=["sim", "off"],
+        default=None,
+        help="pan-tilt-zoom heads of the site's active sensors: sim (simulated, or ONVIF where"
+        " site.json configures it) or off (default: $DEMTRACK_HEADS, else sim)",
     )
     add_live_arguments(p, replay_default=[])
     p.add_argument(

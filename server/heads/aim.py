@@ -1,10 +1,11 @@
 """Where to point a head: a ground point or a live track, to pan and tilt.
 
-:func:`aim_pan_tilt` is the inverse of the pan-tilt head model (``azimuth = mount_yaw +
-pan``, ``elevation = tilt``, levelled tripod); :func:`check_ground_point` adds the checks
-an operator's "look here" needs (on the DEM, a clear sight line, inside the tilt range),
-each failure one line. :func:`track_motion` reads the pipeline's newest estimate of a
-track (position and velocity) without holding up ingest, and :func:`los_exit_s` says when
+:func:`aim_pan_tilt` is the inverse pointing of the pan-tilt head model
+(:func:`demtrack.core.camera.pointing.point_head_at`); :func:`check_ground_point` adds the
+checks an operator's "look here" needs (on the DEM, a clear sight line, inside the tilt
+range: :func:`~demtrack.core.camera.pointing.aim_check`), each failure one line.
+:func:`track_motion` reads the pipeline's newest estimate of a track (position and
+velocity) without holding up ingest, and :func:`los_exit_s` says when
 a head that follows a target will lose its line of sight to it (the target's path
 extrapolated as the hand-off predictor does: along its road, or straight).
 """
@@ -18,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from demtrack.core.camera.head_motion import SlewLimits
-from demtrack.core.camera.pantilt import wrap_deg
+from demtrack.core.camera.pointing import aim_check, point_head_at
 from demtrack.core.errors import DemtrackError
 from demtrack.core.site.folder import Sensor, Site
 from demtrack.core.tracking.roadfollow import follow_road
@@ -34,20 +35,23 @@ __all__ = [
     "track_motion",
 ]
 
-#: Height (m) of the standing target a ground point stands for in the sight-line check.
-LOOK_HEIGHT_M = 1.5
+#: Height (m) above a ground point that "look here" aims at (aim_check's default).
+LOOK_HEIGHT_M = 1.0
 
 
 class AimError(DemtrackError, ValueError):
     """A point a head cannot be pointed at (off the DEM, hidden, outside the tilt range)."""
 
 
-def aim_pan_tilt(sensor: Sensor, p_enu: np.ndarray) -> tuple[float, float]:
-    """Pan and tilt (degrees) that centre ``p_enu`` (site frame, m) in ``sensor``'s image."""
-    d = np.asarray(p_enu, dtype=np.float64) - sensor.head.position_enu
-    az = math.degrees(math.atan2(d[0], d[1]))  # clockwise from north: east first
-    tilt = math.degrees(math.atan2(d[2], math.hypot(d[0], d[1])))
-    return float(wrap_deg(az - sensor.head.mount_yaw_deg)), tilt
+def aim_pan_tilt(
+    sensor: Sensor, p_enu: np.ndarray, hfov_deg: float | None = None
+) -> tuple[float, float]:
+    """Pan and tilt (degrees) that centre ``p_enu`` (site frame, m) in ``sensor``'s image.
+
+    :func:`~demtrack.core.camera.pointing.point_head_at` at the zoom ``hfov_deg`` (None:
+    the calibrated lens), through the sensor's zoom table when it has one.
+    """
+    return point_head_at(sensor.head, p_enu, hfov_deg=hfov_deg, zoom=getattr(sensor, "zoom", None))
 
 
 def sensor_at(sensor: Sensor, pan_deg: float, tilt_deg: float) -> Sensor:
@@ -62,37 +66,29 @@ def check_ground_point(
     n_m: float,
     u_m: float | None,
     limits: SlewLimits,
-    max_range_m: float = 5000.0,
+    hfov_deg: float | None = None,
 ) -> tuple[np.ndarray, float, float]:
     """``(p_enu, pan_deg, tilt_deg)`` for a ground point, or :class:`AimError` saying why not.
 
-    ``u_m`` ``None`` takes the DEM's height there. Visible means at least half of a
-    standing 1.5 m target on the point has a clear line of sight from the head.
+    :func:`~demtrack.core.camera.pointing.aim_check`: ``u_m`` ``None`` takes the DEM's
+    height there; the sight line to a point 1 m above the ground (the middle of what
+    stands there) must clear the terrain, and the tilt must lie in the head's range.
     """
-    if u_m is None:
-        u = float(site.dem.sample(np.array([e_m]), np.array([n_m]))[0])
-        if not math.isfinite(u):
-            raise AimError(f"point ({e_m:.1f}, {n_m:.1f}) m is outside the DEM")
-    else:
-        u = float(u_m)
-    p = np.array([e_m, n_m, u], dtype=np.float64)
-    pan, tilt = aim_pan_tilt(sensor, p)
-    if not limits.tilt_min_deg <= tilt <= limits.tilt_max_deg:
+    where = [e_m, n_m] if u_m is None else [e_m, n_m, u_m]
+    check = aim_check(
+        sensor.head,
+        where,
+        site.dem,
+        slew_limits=limits.to_dict(),
+        hfov_deg=hfov_deg,
+        zoom=getattr(sensor, "zoom", None),
+    )
+    if not check.visible:
         raise AimError(
-            f"sensor {sensor.id}: the point needs tilt {tilt:.1f} deg, outside the head's range"
-            f" [{limits.tilt_min_deg:g}, {limits.tilt_max_deg:g}] deg"
+            f"sensor {sensor.id} cannot look at ({e_m:.1f}, {n_m:.1f}) m: {check.reason}"
         )
-    dist = float(np.linalg.norm(p - sensor.head.position_enu))
-    if dist > max_range_m:
-        raise AimError(
-            f"sensor {sensor.id}: the point is {dist:.0f} m away (limit {max_range_m:.0f} m)"
-        )
-    seen = target_visible_fraction(
-        site.dem, sensor.camera, p[None, :], LOOK_HEIGHT_M, max_range_m=max_range_m, in_view=False
-    )[0]
-    if seen < 0.5:
-        raise AimError(f"sensor {sensor.id} cannot see the point: the terrain hides it")
-    return p, pan, tilt
+    p = np.array(check.target_enu, dtype=np.float64) - [0.0, 0.0, LOOK_HEIGHT_M]
+    return p, check.pan_deg, check.tilt_deg
 
 
 @dataclass(frozen=True, eq=False)
@@ -110,14 +106,16 @@ class TrackMotion:
         return self.p_enu + self.v_enu * (float(t_s) - self.t_s)
 
 
-def track_motion(pipeline: Any, track_id: int, window_s: float = 1.0) -> TrackMotion | None:
+def track_motion(
+    pipeline: Any, track_id: int, window_s: float = 1.0, wait_s: float = 0.05
+) -> TrackMotion | None:
     """The pipeline's newest estimate of ``track_id``; None if unknown or busy.
 
     Velocity is the mean over the last ``window_s`` seconds of points. The pipeline's lock
-    is tried for 50 ms only: a controller tick never waits for a long ingest.
+    is tried for ``wait_s`` only (50 ms): a controller tick never waits for a long ingest.
     """
     lock = pipeline.commits.lock
-    if not lock.acquire(timeout=0.05):
+    if not lock.acquire(timeout=wait_s):
         return None
     try:
         live = {t.id: t for t in pipeline.tracker.tracks(include_ended=False)}

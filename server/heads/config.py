@@ -12,8 +12,11 @@ entry says ``"active": true``. Its limits are ``"slew_limits"`` (the field names
                      "hfov_deg": [60, 3], "zoom_scale": "focal"}
 
 ``{"kind": "sim"}`` (or no entry) is a simulated head starting at the sensor's stored
-pan and tilt. The password comes from the environment variable ``password_env`` names,
-never from the manifest. The manifest is read here, raw, for these keys.
+pan and tilt; ``{"kind": "external"}`` is a head the server does not drive (its gateway
+posts its poses to ``POST /api/sensors/{id}/poses``), so it gets no unit. The password
+comes from the environment variable ``password_env`` names, never from the manifest.
+``active`` and ``slew_limits`` are the loaded :class:`~demtrack.core.site.folder.Sensor`'s;
+``head_adapter`` is read here from the raw manifest entry.
 """
 
 from __future__ import annotations
@@ -33,7 +36,10 @@ from .adapter import HeadAdapter
 from .onvif import OnvifHead, OnvifMapping
 from .simulated import SimulatedHead
 
-__all__ = ["HeadConfig", "active_head_configs", "build_adapter"]
+__all__ = ["KINDS", "HeadConfig", "active_head_configs", "build_adapter"]
+
+#: ``head_adapter.kind`` values: driven by the server (sim, onvif) or not (external).
+KINDS = ("sim", "onvif", "external")
 
 
 @dataclass(frozen=True)
@@ -72,10 +78,13 @@ def active_head_configs(site: Site) -> list[HeadConfig]:
         except DemtrackError as exc:
             raise SiteError(f"site.json: sensor {sensor.id!r}: {exc}") from None
         adapter = entry.get("head_adapter") or {"kind": "sim"}
-        if not isinstance(adapter, Mapping) or adapter.get("kind") not in ("sim", "onvif"):
+        if not isinstance(adapter, Mapping) or adapter.get("kind") not in KINDS:
             raise SiteError(
-                f"site.json: sensor {sensor.id!r}: head_adapter.kind must be 'sim' or 'onvif'"
+                f"site.json: sensor {sensor.id!r}: head_adapter.kind must be one of"
+                f" {', '.join(KINDS)}"
             )
+        if adapter["kind"] == "external":
+            continue
         out.append(HeadConfig(sensor.id, limits, dict(adapter)))
     return out
 

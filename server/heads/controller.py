@@ -75,6 +75,7 @@ class HeadUnit:
     error: str | None = None
     latency_s: float = 0.0
     last_aim: tuple[float, float] | None = None
+    unfed: list[HeadStatus] = field(default_factory=list)
 
     def info(self) -> dict[str, Any]:
         """``{sensor_id, kind, mode, target, status, error, latency_s, limits}``."""
@@ -109,6 +110,12 @@ class HeadController:
         Tick (s) and the fixed part of the follow lead (s; the server passes its reorder lag).
     clock : callable
         Wall-clock UNIX seconds (journal rows, latency).
+    handoff_horizon_s : float
+        How far ahead hand-offs are predicted (s).
+    feed_every_s : float
+        The polled poses go to the feed in batches this often (s): one durable pose
+        batch per head every half second instead of one per poll. Detections wait for
+        their poses in the pipeline, so batching delays them, never loses them.
     """
 
     def __init__(
@@ -123,6 +130,7 @@ class HeadController:
         lead_s: float = 0.0,
         clock: Callable[[], float] = time.time,
         handoff_horizon_s: float = 20.0,
+        feed_every_s: float = 0.5,
     ) -> None:
         self.site = site
         self.units = {u.sensor_id: u for u in units}
@@ -135,6 +143,8 @@ class HeadController:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.n_ticks = 0
+        self.feed_every_s = float(feed_every_s)
+        self._fed_at = -np.inf
 
     # ------------------------------------------------------------ lifecycle
     def start(self) -> HeadController:
@@ -145,10 +155,12 @@ class HeadController:
         return self
 
     def stop(self) -> None:
-        """Stop ticking (the heads keep their last command)."""
+        """Stop ticking (the heads keep their last command); the last poses are fed."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=10.0)
+        with self._lock:
+            self.flush_poses()
 
     def _run(self) -> None:
         while not self._stop.wait(self.period_s):
@@ -190,7 +202,7 @@ class HeadController:
         with self._lock:
             unit = self.unit(sensor_id)
             p, pan, tilt = check_ground_point(
-                self.site, self._sensor_now(unit), e_m, n_m, u_m, unit.limits
+                self.site, self._sensor_now(unit), e_m, n_m, u_m, unit.limits, self._hfov(unit)
             )
             unit.adapter.absolute_move(pan, tilt, None)
             target = {"e_m": float(p[0]), "n_m": float(p[1]), "u_m": float(p[2])}
@@ -201,7 +213,10 @@ class HeadController:
         """Assign a head to a live track: mode ``follow``."""
         with self._lock:
             unit = self.unit(sensor_id)
-            motion = None if self.pipeline is None else track_motion(self.pipeline, track_id)
+            # an operator's request may wait for a batch being processed (2 s at most)
+            motion = (
+                None if self.pipeline is None else track_motion(self.pipeline, track_id, wait_s=2.0)
+            )
             if motion is None or motion.ended:
                 raise NotFoundError(f"no live track {track_id} to follow")
             self._set(unit, "follow", {"track_id": int(track_id)})
@@ -223,6 +238,10 @@ class HeadController:
             self.n_ticks += 1
             for unit in self.units.values():
                 self._poll(unit)
+            now = self.clock()
+            if now - self._fed_at >= self.feed_every_s:
+                self._fed_at = now
+                self.flush_poses()
             for unit in self.units.values():
                 if unit.mode in ("follow", "handoff"):
                     self._drive(unit)
@@ -240,13 +259,28 @@ class HeadController:
         age = self.clock() - status.t_s
         if 0.0 <= age < 5.0:  # a head whose clock is off says nothing about latency
             unit.latency_s += 0.2 * (age - unit.latency_s)
-        new = unit.status is None or status.t_s > unit.status.t_s
+        if unit.status is None or status.t_s > unit.status.t_s:
+            unit.unfed.append(status)
         unit.status = status
-        if new and self.feed is not None:
+
+    def flush_poses(self) -> None:
+        """Hand the statuses polled since the last flush to the pose feed, per head."""
+        if self.feed is None:
+            return
+        for unit in self.units.values():
+            if not unit.unfed:
+                continue
+            batch, unit.unfed = unit.unfed, []
             try:
-                self.feed(unit.sensor_id, [status])
+                self.feed(unit.sensor_id, batch)
             except DemtrackError as exc:
-                log.warning("pose of %s refused: %s", unit.sensor_id, exc)
+                log.warning("poses of %s refused: %s", unit.sensor_id, exc)
+
+    def _hfov(self, unit: HeadUnit) -> float | None:
+        """The head's zoom for pointing: its field of view where the lens has a zoom table."""
+        if unit.status is None or getattr(self.site.sensor(unit.sensor_id), "zoom", None) is None:
+            return None
+        return unit.status.hfov_deg
 
     def _sensor_now(self, unit: HeadUnit) -> Sensor:
         sensor = self.site.sensor(unit.sensor_id)
@@ -282,7 +316,7 @@ class HeadController:
             return
         lead = self.lead_s + self.period_s + unit.latency_s
         p = motion.at(motion.t_s + lead) + np.array([0.0, 0.0, TARGET_HEIGHT_M / 2])
-        pan, tilt = aim_pan_tilt(self.site.sensor(unit.sensor_id), p)
+        pan, tilt = aim_pan_tilt(self.site.sensor(unit.sensor_id), p, self._hfov(unit))
         if (
             unit.last_aim is not None
             and max(

@@ -85,12 +85,19 @@ class OnvifMapping:
 
     # pan / tilt ----------------------------------------------------------------
     def pan_to_x(self, pan_deg: float) -> float:
-        """ONVIF pan x (-1..1, clipped) of a pan (degrees)."""
-        lo, hi = self.pan_range_deg
-        span = hi - lo
-        # the copy of the pan inside the range (a 360-degree range takes any pan)
-        p = lo + (pan_deg - lo) % 360.0 if abs(span) >= 360.0 else pan_deg
-        return _clip(-1.0 + 2.0 * (p - lo) / span, -1.0, 1.0)
+        """ONVIF pan x (-1..1, clipped) of a pan (degrees).
+
+        The copy of the pan (modulo 360) that lies inside the range is used: a head whose
+        range is 0..350 reads pan -20 as 340.
+        """
+        lo, hi = sorted(self.pan_range_deg)
+        p = pan_deg
+        for candidate in (pan_deg, pan_deg + 360.0, pan_deg - 360.0):
+            if lo <= candidate <= hi:
+                p = candidate
+                break
+        a, b = self.pan_range_deg
+        return _clip(-1.0 + 2.0 * (p - a) / (b - a), -1.0, 1.0)
 
     def x_to_pan(self, x: float) -> float:
         """Pan (degrees, in (-180, 180]) of an ONVIF pan x."""

@@ -3,8 +3,8 @@
 :func:`start_heads` is called in the app's lifespan once the pipeline has replayed the
 store (so a restored ``follow`` finds its track): one adapter per active sensor
 (:mod:`.config`), the journal beside the database, the pose feed into
-``state.poses.accept`` (the pose ingest; until the server has one, poses are only kept
-as each head's last status).
+``state.poses.accept`` (the pose ingest: stored, streamed as ``sensor_pose``, used to
+geolocate the detections of that moment).
 """
 
 from __future__ import annotations
@@ -14,12 +14,14 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from demtrack.core.camera.pose_series import PoseSample
+
 from .adapter import HeadStatus
 from .config import active_head_configs, build_adapter
 from .controller import HeadController, HeadUnit, PoseFeed
 from .journal import HeadJournal
 
-__all__ = ["journal_path", "pose_feed", "start_heads"]
+__all__ = ["check_heads", "journal_path", "pose_feed", "start_heads"]
 
 log = logging.getLogger("demtrack.server")
 
@@ -30,17 +32,33 @@ def journal_path(db_path: Path) -> Path:
 
 
 def pose_feed(state: Any) -> PoseFeed | None:
-    """``feed(sensor_id, statuses)`` into ``state.poses.accept``; None without pose ingest."""
+    """``feed(sensor_id, statuses)`` into ``state.poses.accept`` (None without one)."""
     poses = getattr(state, "poses", None)
     if poses is None:
         return None
-    from demtrack.core.camera.pose_series import PoseSample  # type: ignore[import-not-found]
+    site = state.site
 
     def feed(sensor_id: str, statuses: Sequence[HeadStatus]) -> None:
-        samples = [PoseSample(s.t_s, s.pan_deg, s.tilt_deg, hfov_deg=s.hfov_deg) for s in statuses]
+        # The field of view only where the lens has a zoom table: a fixed lens is its
+        # calibration, whatever a simulated head's zoom axis says.
+        zoomed = getattr(site.sensor(sensor_id), "zoom", None) is not None
+        samples = [
+            PoseSample(s.t_s, s.pan_deg, s.tilt_deg, hfov_deg=s.hfov_deg if zoomed else None)
+            for s in statuses
+        ]
         poses.accept(sensor_id, samples)
 
     return feed
+
+
+def check_heads(site: Any, settings: Any) -> None:
+    """Build (without starting or connecting) every adapter: a bad entry raises one line.
+
+    Called by :func:`demtrack.server.app.check_startup`, before uvicorn runs.
+    """
+    if settings.heads != "off":
+        for config in active_head_configs(site):
+            build_adapter(site, config)
 
 
 def start_heads(state: Any) -> HeadController | None:

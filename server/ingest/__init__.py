@@ -11,9 +11,14 @@
 :mod:`.stream_messages`  the typed stream messages (msgspec structs, encoded once)
 :mod:`.publish`          derived rows stored, then published as the stored text
 :mod:`.replay_on_start`  the start-up replay of the stored fixes
+:mod:`.pose_values`      posted pose records -> checked samples (the pose file reader)
+:mod:`.pose_book`        stored poses, rolling series, detections waiting for their pose
+:mod:`.pose_stream`      ``sensor_pose`` messages, rate-limited per sensor
+:mod:`.poses`            :class:`~.poses.PoseIngest`, the server's pose entry (``state.poses``)
 
-May import ``demtrack.core``, :mod:`demtrack.server.store`, :mod:`demtrack.server.hub` and
-:mod:`demtrack.server.live_events`; nothing here imports the app or the routers.
+May import ``demtrack.core``, :mod:`demtrack.server.store`, :mod:`demtrack.server.hub`,
+:mod:`demtrack.server.live_events` and :mod:`demtrack.server.footprints`; nothing here
+imports the app or the routers.
 """
 
 from __future__ import annotations

@@ -163,7 +163,10 @@ def replay_detections(
     with tempfile.TemporaryDirectory(dir=db_dir) as tmp:
         store = Store(Path(tmp) / "replay.sqlite3")
         try:
-            pipeline = Pipeline(site, store, method, publish, reorder_lag_s=reorder_lag_s)
+            # No wall clock in an offline replay: every batch's sensor_pose goes at once.
+            pipeline = Pipeline(
+                site, store, method, publish, reorder_lag_s=reorder_lag_s, pose_interval_s=0.0
+            )
             pipeline.start()
             for records, by_sensor in batches:
                 for sensor, recs in sorted(by_sensor.items()):
@@ -172,6 +175,7 @@ def replay_detections(
                 if records:
                     pipeline.ingest(records)
             tracks = tuple(track_from_body(b) for b in store.tracks())
+            pipeline.close()
         finally:
             store.close()
     return LiveReplay(tracks, tuple(ended), tuple(confirmed), len(batches))

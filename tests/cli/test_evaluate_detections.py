@@ -32,13 +32,13 @@ def run(capsys, *argv):
 
 
 @pytest.fixture(scope="module")
-def walk(sample_site_dir, tmp_path_factory):
-    """Fifteen seconds of the pedestrians from cam1, after the 15 s lead-in."""
-    out = tmp_path_factory.mktemp("walk") / "walk.mp4"
+def clip(sample_site_dir, tmp_path_factory):
+    """The vehicle run from cam1 to t = 25 s, after the 15 s lead-in (401 frames)."""
+    out = tmp_path_factory.mktemp("run") / "run.mp4"
     status = main(
         [
-            "sample-video", "--site", str(sample_site_dir), "--scenario", "pedestrians",
-            "--sensor", "cam1", "-o", str(out), "--start", START, "--t-to", "15",
+            "sample-video", "--site", str(sample_site_dir), "--scenario", "vehicle-run",
+            "--sensor", "cam1", "-o", str(out), "--start", START, "--t-to", "25",
         ]
     )  # fmt: skip
     assert status == 0
@@ -76,11 +76,11 @@ def test_matching_is_the_best_assignment():
         assert all(p[2] >= 0.5 for p in match_boxes(dets, truths))
 
 
-def test_true_boxes_score_perfectly_and_shifts_score_as_computed(walk, sample_site_dir):
+def test_true_boxes_score_perfectly_and_shifts_score_as_computed(clip, sample_site_dir):
     site = load_site(sample_site_dir)
-    truth = read_video_truth(walk.with_name("walk.truth.jsonl"))
+    truth = read_video_truth(clip.with_name("run.truth.jsonl"))
     dets = truth_detections(truth)
-    assert len(dets) > 200
+    assert len(dets) > 150
     s = score_detections(site, dets, truth)
     assert (s.precision, s.recall, s.mean_iou, s.class_accuracy) == (1.0, 1.0, 1.0, 1.0)
     assert s.foot_px.max() == 0.0 and np.nanmax(s.foot_m) == 0.0
@@ -94,9 +94,10 @@ def test_true_boxes_score_perfectly_and_shifts_score_as_computed(walk, sample_si
     assert s.recall == 1.0 and s.mean_iou == pytest.approx(0.6)
     widths = np.array([d.bbox[2] - d.bbox[0] for d in dets])
     assert np.sort(s.foot_px) == pytest.approx(np.sort(widths / 4))
-    assert 0.0 < np.nanmedian(s.foot_m) < 1.0  # a pixel or two is decimetres on the ground
+    # Sideways on the image at 100-250 m with f = 763 px: 0.13-0.33 m a pixel on the ground.
+    assert 0.1 < np.nanmedian(s.foot_m / s.foot_px) < 0.4
     # Wrong classes, then boxes too far off (IoU 1/3), then every detection twice.
-    s = score_detections(site, [replace(d, cls="vehicle") for d in dets], truth)
+    s = score_detections(site, [replace(d, cls="human") for d in dets], truth)
     assert s.class_accuracy == 0.0 and s.recall == 1.0
     half = [
         replace(d, bbox=(d.bbox[0] + dw, d.bbox[1], d.bbox[2] + dw, d.bbox[3]))
@@ -118,45 +119,51 @@ def test_true_boxes_score_perfectly_and_shifts_score_as_computed(walk, sample_si
     assert pooled.n_truth == 2 * s.n_truth and pooled.precision == s.precision
 
 
-def test_mistakes_are_one_line(capsys, sample_site_dir, walk, tmp_path):
-    base = ["evaluate-detections", "--site", sample_site_dir, "--scenario", "pedestrians"]
-    status, _, err = run(capsys, *base, "--sensor", "cam1", "--sensor", "cam2", "--video", walk)
+def test_mistakes_are_one_line(capsys, sample_site_dir, clip, tmp_path):
+    base = ["evaluate-detections", "--site", sample_site_dir, "--scenario", "vehicle-run"]
+    status, _, err = run(capsys, *base, "--sensor", "cam1", "--sensor", "cam2", "--video", clip)
     assert status == 2 and "one --video per --sensor" in err
-    status, _, err = run(capsys, *base, "--sensor", "cam2", "--video", walk)
-    assert status == 2 and "is pedestrians from cam1, not pedestrians from cam2" in err
+    status, _, err = run(capsys, *base, "--sensor", "cam2", "--video", clip)
+    assert status == 2 and "is vehicle-run from cam1, not vehicle-run from cam2" in err
     status, _, err = run(capsys, *base, "--sensor", "cam1", "--video", tmp_path / "none.mp4")
     assert status == 2 and "no such file" in err
     lone = tmp_path / "lone.mp4"
-    lone.write_bytes(walk.read_bytes())
+    lone.write_bytes(clip.read_bytes())
     status, _, err = run(capsys, *base, "--sensor", "cam1", "--video", lone)
     assert status == 2 and "lone.truth.jsonl" in err and len(err.strip().splitlines()) == 1
 
 
-def test_detector_end_to_end_on_a_clip(capsys, sample_site_dir, walk):
-    """The VSAM detector on twenty seconds of walkers: the bar on precision and recall."""
+def test_detector_end_to_end_on_a_clip(capsys, sample_site_dir, clip):
+    """The VSAM detector on the car's first 25 s from cam1: the issue's detection bar.
+
+    Scored from t = 10 s: from a cold start the detector's background model takes about
+    25 s of video to learn the swaying crowns (clutter until then; docs/video.md).
+    """
     status, out, _ = run(
-        capsys, "evaluate-detections", "--site", sample_site_dir, "--scenario", "pedestrians",
-        "--sensor", "cam1", "--video", walk, "--json",
+        capsys, "evaluate-detections", "--site", sample_site_dir, "--scenario", "vehicle-run",
+        "--sensor", "cam1", "--video", clip, "--score-from", "10", "--json",
     )  # fmt: skip
     assert status == 0
     doc = json.loads(out)
     (det,) = doc["detection"]
-    assert det["truth_boxes"] > 200
+    assert det["truth_boxes"] > 100
     assert det["precision"] >= 0.9 and det["recall"] >= 0.9
+    assert det["class_accuracy"] >= 0.95 and det["mean_iou"] >= 0.8
+    assert det["foot_px_median"] <= 1.0
     assert {r["method"] for r in doc["tracking"]} >= {"kalman", "multi-hypothesis-road"}
 
 
 def test_tracking_columns_agree_when_the_detections_are_the_truth(
-    capsys, sample_site_dir, walk, tmp_path
+    capsys, sample_site_dir, clip, tmp_path
 ):
     """Saved detections that are the true boxes: both tracking columns are the same."""
     saved = tmp_path / "perfect.jsonl"
     write_detections_jsonl(
-        saved, truth_detections(read_video_truth(walk.with_name("walk.truth.jsonl")))
+        saved, truth_detections(read_video_truth(clip.with_name("run.truth.jsonl")))
     )
     argv = [
-        "evaluate-detections", "--site", sample_site_dir, "--scenario", "pedestrians",
-        "--sensor", "cam1", "--video", walk, "--detections", saved,
+        "evaluate-detections", "--site", sample_site_dir, "--scenario", "vehicle-run",
+        "--sensor", "cam1", "--video", clip, "--detections", saved,
     ]  # fmt: skip
     status, out, _ = run(capsys, *argv, "--json")
     assert status == 0
@@ -166,8 +173,8 @@ def test_tracking_columns_agree_when_the_detections_are_the_truth(
     for row in doc["tracking"]:
         assert row["video"] == row["boxes"]
     kalman = next(r for r in doc["tracking"] if r["method"] == "kalman")
-    assert kalman["boxes"]["rmse_m"] < 1.0 and kalman["boxes"]["tracks"] >= 3
+    assert kalman["boxes"]["rmse_m"] < 2.0 and kalman["boxes"]["tracks"] >= 1
     status, out, _ = run(capsys, *argv)
     assert status == 0 and "| cam1 | " in out and "meets the bar" in out
-    status, _, err = run(capsys, *argv, "--sensor", "cam2", "--video", walk)
+    status, _, err = run(capsys, *argv, "--sensor", "cam2", "--video", clip)
     assert status == 2 and "one --detections per --sensor" in err

@@ -154,12 +154,12 @@ def test_slew_look_release_and_refusals(sample_site_dir, tmp_path):
     )
     visible, hidden = pts[seen >= 0.9][0], pts[seen == 0.0][0]
     info = ctl.look("cam1", float(visible[0]), float(visible[1]), None)
-    pan, tilt = aim_pan_tilt(sensor, visible)
+    pan, tilt = aim_pan_tilt(sensor, visible + [0.0, 0.0, 1.0])  # 1 m up: what stands there
     assert info["mode"] == "look"
     assert (info["target"]["pan_deg"], info["target"]["tilt_deg"]) == pytest.approx((pan, tilt))
-    with pytest.raises(AimError, match="cannot see the point"):
+    with pytest.raises(AimError, match="blocked by terrain"):
         ctl.look("cam1", float(hidden[0]), float(hidden[1]), None)
-    with pytest.raises(AimError, match="outside the DEM"):
+    with pytest.raises(AimError, match="off the DEM"):
         ctl.look("cam1", 1e6, 0.0, None)
     with pytest.raises(UnknownSensorError):
         ctl.info("nope")

@@ -98,3 +98,24 @@ def test_slew_over_http_survives_sigkill(sample_site_dir, tmp_path):
         proc.send_signal(signal.SIGKILL)
         proc.wait(10)
     assert (tmp_path / "console.sqlite3.heads.jsonl").is_file()
+
+
+def test_a_bad_head_adapter_stops_serve_with_one_line(sample_site_dir, tmp_path):
+    adapter = {
+        "kind": "onvif",
+        "url": "http://h/onvif",
+        "profile": "p",
+        "password_env": "UNSET_PW_7",
+    }
+    entry = {"active": True, "head_adapter": adapter}
+    site = active_site(sample_site_dir, tmp_path / "site", {"cam3": entry})
+    env = {k: v for k, v in os.environ.items() if k != "UNSET_PW_7"}
+    proc = subprocess.run(
+        [sys.executable, "-m", "demtrack.cli", "serve", "--site", str(site),
+         "--db", str(tmp_path / "c.sqlite3"), "--port", "0", "--no-warm-up"],
+        capture_output=True, text=True, check=False, timeout=120,
+        env={**env, "DEMTRACK_TOKEN": TOKEN},
+    )  # fmt: skip
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert "cam3" in proc.stderr and "UNSET_PW_7 is not set" in proc.stderr

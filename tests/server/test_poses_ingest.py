@@ -145,3 +145,26 @@ def test_accept_takes_samples_from_a_head_adapter(client, n_bad):
     assert ack["accepted"] == 5 and ack["skipped"] == n_bad and ack["sensor"] == "cam2"
     assert state.poses.current("cam2") == samples[4]
     assert [b["pan_deg"] for b in state.store.poses("cam2")] == [5.0, 6.0, 7.0, 8.0, 9.0]
+
+
+def test_detection_records_carry_inline_poses_and_the_ack_counts_no_pose(client):
+    from server_helpers import walk
+
+    recs = [{**r, "pan_deg": 3.0 + k, "tilt_deg": -9.0} for k, r in enumerate(walk(n=3, t0=T0))]
+    late = walk(n=1, t0=T0 + 5.0)  # 4.8 s after cam1's newest pose: none close enough
+    r = client.post("/api/detections", headers=AUTH, json={"detections": recs + late})
+    ack = r.json()
+    assert r.status_code == 200 and ack["accepted"] == 4 and ack["poses"] == 3
+    stored = client.get("/api/sensors/cam1/poses", headers=AUTH).json()["poses"]
+    assert [(p["t_s"], p["pan_deg"]) for p in stored] == [
+        (T0, 3.0),
+        (T0 + 0.2, 4.0),
+        (T0 + 0.4, 5.0),
+    ]
+    # the late detection falls behind the reorder horizon once cam2's newer one comes
+    r = client.post(
+        "/api/detections", headers=AUTH, json={"detections": walk(sensor="cam2", n=1, t0=T0 + 9)}
+    )
+    assert r.json()["no_pose"] == 0  # cam2's own detection had a pose (fixed camera)
+    counts = client.get("/api/status", headers=AUTH).json()["counts"]
+    assert counts["no_pose"] == 1 and counts["pose_waiting"] == 0

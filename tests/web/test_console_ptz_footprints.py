@@ -16,11 +16,8 @@ pytestmark = pytest.mark.timeout(400)
 T0 = 1_780_000_000.0
 
 FOOTPRINT = """(id) => {
-  const feats = window.demtrack.map.coverageOf.get(id) || [];
-  const poly = feats.find((f) => f.get('kind') === 'footprint');
-  const wedge = feats.find((f) => f.get('kind') === 'wedge');
-  return poly ? {ring: poly.getGeometry().getCoordinates()[0],
-                 wedge: wedge ? wedge.getGeometry().getCoordinates() : null} : null;
+  const poly = window.demtrack.map.coverageOf.get(id);
+  return poly ? {ring: poly.getGeometry().getCoordinates()[0], wedge: poly.get('wedge')} : null;
 }"""
 PANEL = """(id) => {
   const p = window.demtrack.ui.cams.get(id).pose;

@@ -197,7 +197,7 @@ export class SiteMap {
     const pts = this.sensors.getSource();
     pts.clear();
     this.coverage.getSource().clear();
-    this.coverageOf = new Map(); // sensor id -> [footprint polygon, wedge]
+    this.coverageOf = new Map(); // sensor id -> its footprint feature
     for (const s of sensors) {
       const p = new ol.Feature(new ol.geom.Point([s.position_enu[0], s.position_enu[1]]));
       p.set("sensor", s.id);
@@ -210,26 +210,24 @@ export class SiteMap {
   /**
    * Draw sensor `id`'s ground footprint (`footprint.enu`: border points, clockwise from
    * the image's top-left corner) and its field-of-view wedge: the lines from the camera
-   * at `xy` to the far corners of the footprint (the top edge's ends). Replaces the old.
+   * at `xy` to the far corners of the footprint (the top edge's ends), drawn by the same
+   * feature (its `wedge`, a second style). Replaces the old one.
    */
   setFootprint(id, xy, footprint) {
     const cov = this.coverage.getSource();
-    for (const f of this.coverageOf.get(id) || []) cov.removeFeature(f);
+    const old = this.coverageOf.get(id);
+    if (old) cov.removeFeature(old);
+    this.coverageOf.delete(id);
     const ring = (footprint?.enu || []).map((q) => [q[0], q[1]]);
-    const feats = [];
-    if (ring.length >= 3) {
-      const corner = Math.floor((footprint.n_rays === ring.length ? footprint.n_rays : ring.length) / 4);
-      const wedge = new ol.Feature(new ol.geom.LineString([ring[0], xy, ring[corner]]));
-      wedge.set("sensor", id);
-      wedge.set("kind", "wedge");
-      ring.push(ring[0]);
-      const poly = new ol.Feature(new ol.geom.Polygon([ring]));
-      poly.set("sensor", id);
-      poly.set("kind", "footprint");
-      feats.push(poly, wedge);
-    }
-    cov.addFeatures(feats);
-    this.coverageOf.set(id, feats);
+    if (ring.length < 3) return;
+    const corner = Math.floor((footprint.n_rays === ring.length ? footprint.n_rays : ring.length) / 4);
+    const wedge = [ring[0], xy, ring[corner]];
+    ring.push(ring[0]);
+    const poly = new ol.Feature(new ol.geom.Polygon([ring]));
+    poly.set("sensor", id);
+    poly.set("wedge", wedge);
+    cov.addFeature(poly);
+    this.coverageOf.set(id, poly);
   }
 
   /** A `sensor_pose` message: the sensor's footprint and wedge move to the new pose's. */
@@ -384,11 +382,17 @@ export class SiteMap {
 
   coverageStyle(f) {
     const c = this.sensorColour(f.get("sensor"));
-    if (f.get("kind") === "wedge") return new ol.style.Style({ stroke: stroke(withAlpha(c, 0.8), 1, [2, 4]) });
-    return new ol.style.Style({
+    const area = new ol.style.Style({
       fill: new ol.style.Fill({ color: withAlpha(c, 0.14) }),
       stroke: stroke(withAlpha(c, 0.9), 1.5, [6, 4]),
     });
+    const wedge = f.get("wedge");
+    if (!wedge) return area;
+    // The field of view's edges, camera to far corners: the footprint's second style.
+    return [area, new ol.style.Style({
+      geometry: new ol.geom.LineString(wedge),
+      stroke: stroke(withAlpha(c, 0.8), 1, [2, 4]),
+    })];
   }
 
   sensorStyle(f) {
