@@ -353,6 +353,14 @@ class VideoReplay:
                 self.late_s = max(self.late_s, -wait)
                 self.n_clock_moves += 1
                 wall0 += -wait
+                if self.n_clock_moves == 1:
+                    busy = self.stats()["busy_ms_per_frame"]
+                    log.warning(
+                        "video replay cannot keep up at %g x: decoding and detecting take"
+                        " %s ms a frame per camera; it runs slower (a lower --speed keeps up)",
+                        self.speed,
+                        "/".join(f"{v:.0f}" for v in busy.values()),
+                    )
             elif wait < 0:
                 self.late_s = max(self.late_s, -wait)
             batch = [item]
