@@ -118,7 +118,7 @@ def _watch_once(args, site, sink, progress, session: str, index0: int) -> int:
         progress.total = pipe.reader.n_frames
     frames = getattr(args, "frame_poster", None)
     if frames is not None:  # --frames: keep the decoded frames the detections belong to
-        from demtrack.server.video.replay_video import FrameKeeper
+        from demtrack.server.video.frame_keeper import FrameKeeper
 
         pipe.reader = FrameKeeper(pipe.reader, keep=pipe.lag + 4, klv=True)  # type: ignore[assignment]
     source = _source_id(args.source)

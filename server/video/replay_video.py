@@ -35,7 +35,6 @@ import math
 import queue
 import threading
 import time
-from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -48,10 +47,11 @@ from demtrack.core.video.pipeline import VideoDetections, make_detector, site_ma
 from demtrack.core.video.reader import Frame, VideoReader
 
 from .frame_book import FrameBook
+from .frame_keeper import FrameKeeper
 from .jpeg import encode_jpeg
 from .source import VideoClip
 
-__all__ = ["LEAD_FRAMES", "FrameKeeper", "VideoItem", "VideoReplay", "playlist"]
+__all__ = ["LEAD_FRAMES", "VideoItem", "VideoReplay", "playlist"]
 
 log = logging.getLogger("demtrack.server")
 
@@ -82,32 +82,6 @@ def playlist(spans: Sequence[tuple[float, float]], gap_s: float) -> tuple[list[f
         offsets.append(at)
         at += max(t_to - t_from, 0.0) + gap_s
     return offsets, at
-
-
-class FrameKeeper:
-    """A reader that remembers its last ``keep`` frames by index.
-
-    :class:`~demtrack.core.video.pipeline.VideoDetections` releases a frame's detections
-    a few frames after decoding it; this finds the frame they belong to. Reads KLV too
-    when ``klv`` (``demtrack watch``); the replay reads none.
-    """
-
-    def __init__(self, reader: VideoReader, keep: int, *, klv: bool = False) -> None:
-        self.reader = reader
-        self.frames: dict[int, Frame] = {}
-        self._order: deque[int] = deque()
-        self.keep = keep
-        self.klv = klv
-
-    def items(self) -> Iterator[Any]:
-        """The reader's items, remembering the frames."""
-        for item in self.reader.items(klv=self.klv):
-            if isinstance(item, Frame):
-                self.frames[item.index] = item
-                self._order.append(item.index)
-                while len(self._order) > self.keep:
-                    self.frames.pop(self._order.popleft(), None)
-            yield item
 
 
 class VideoReplay:
