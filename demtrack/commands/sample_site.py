@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 from .choices import MANIFEST
 from .common import DEFAULT_SITE, port
 from .geolocate import print_geolocation
-from .serve import add_live_arguments, live_overrides, serve_app
+from .serve import add_live_arguments, live_overrides, scenario_source, serve_app
 
 if TYPE_CHECKING:
     from demtrack.core.geolocation.geolocate import Geolocator
@@ -163,7 +163,6 @@ def _serve_demo(
     server_warmer: Any,
 ) -> int:
     from demtrack.samplesite.kernel_warmup import TRACKER_JOBS
-    from demtrack.samplesite.replay_source import SAMPLE_SCENARIOS
     from demtrack.server.app import check_startup, create_app
     from demtrack.server.scene3d import display_host
 
@@ -176,7 +175,7 @@ def _serve_demo(
         "scene3d": not args.no_3d,
         **live,
     }
-    app = create_app(scenarios=SAMPLE_SCENARIOS, **overrides)
+    app = create_app(scenarios=scenario_source(live), **overrides)  # --video: renders videos
     check_startup(app)  # a broken site or database: one line and exit 2, not a traceback
     if server_warmer is not None:
         app.state.warm_after = server_warmer.wait

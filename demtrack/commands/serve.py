@@ -16,6 +16,9 @@ from .common import DEFAULT_SITE, port
 
 __all__ = [
     "SERVER_GC_THRESHOLDS",
+    "VIDEO_DEFAULT",
+    "VIDEO_NAMES",
+    "scenario_source",
     "add_live_arguments",
     "live_overrides",
     "print_token",
@@ -23,6 +26,23 @@ __all__ = [
     "serve_app",
     "tune_gc_for_serving",
 ]
+
+
+#: ``demtrack.samplesite.video_cache.VIDEO_SCENARIOS``: what ``--video`` can play.
+VIDEO_NAMES = ("vehicle-run", "pedestrians", "passing-vehicles")
+#: What ``--video`` replays by default.
+VIDEO_DEFAULT = ("vehicle-run", "pedestrians")
+
+
+def scenario_source(live: dict[str, Any]) -> Any:
+    """The sample site's scenario source; with ``--video``, the one that renders videos."""
+    from demtrack.samplesite.replay_source import SAMPLE_SCENARIOS
+
+    if not live.get("replay_video"):
+        return SAMPLE_SCENARIOS
+    from demtrack.samplesite.video_cache import SampleVideos
+
+    return SampleVideos(log=lambda line: print(f"video: {line}", flush=True))
 
 
 def serve_app(
@@ -126,6 +146,14 @@ def add_live_arguments(p: argparse.ArgumentParser, *, replay_default: list[str])
         " replayed detections carry real times from it",
     )
     p.add_argument(
+        "--video",
+        action="store_true",
+        help="replay from video: each camera's video of the scenario (rendered once into"
+        " SITE/videos/, then reused) goes through the video detector, and the camera panels"
+        " show it (scenarios: vehicle-run, pedestrians, passing-vehicles; default"
+        " vehicle-run and pedestrians)",
+    )
+    p.add_argument(
         "--viser-port",
         type=int,  # checked in live_overrides, with the option named
         default=8080,
@@ -146,9 +174,20 @@ def live_overrides(args: argparse.Namespace, replay_default: list[str]) -> dict[
         raise DemtrackError(f"--viser-port must be within 0..65535, got {args.viser_port}")
     from demtrack.samplesite.stamping import parse_start
 
+    video = bool(getattr(args, "video", False))
+    if video and not args.replay:
+        replay_default = list(VIDEO_DEFAULT)
     replay = list(dict.fromkeys(args.replay)) if args.replay else list(replay_default)
+    if video:
+        bad = [name for name in replay if name not in VIDEO_NAMES]
+        if bad:
+            raise DemtrackError(
+                f"--video cannot play {bad[0]!r}: the sample-video renderer draws"
+                f" {', '.join(VIDEO_NAMES)}"
+            )
     return {
         "replay": replay,
+        "replay_video": video,
         "replay_start_s": parse_start(args.start),
         "replay_speed": args.speed,
         "viser_host": args.host,
@@ -157,7 +196,6 @@ def live_overrides(args: argparse.Namespace, replay_default: list[str]) -> dict[
 
 
 def _run(args: argparse.Namespace) -> int:
-    from demtrack.samplesite.replay_source import SAMPLE_SCENARIOS
     from demtrack.server.app import check_startup, create_app
 
     live = live_overrides(args, [])  # checks --speed and --viser-port before any work
@@ -170,6 +208,10 @@ def _run(args: argparse.Namespace) -> int:
         overrides["db_path"] = args.db
     if args.no_warm_up:
         overrides["warm_up"] = False
+    if args.video and not args.replay:
+        from demtrack.core.errors import DemtrackError
+
+        raise DemtrackError("--video plays a replay: give --replay SCENARIO too")
     if args.replay:
         overrides.update(live)
     if args.scene3d:
@@ -178,7 +220,7 @@ def _run(args: argparse.Namespace) -> int:
         overrides["cot_url"] = args.cot
     if args.heads is not None:
         overrides["heads"] = args.heads
-    app = create_app(scenarios=SAMPLE_SCENARIOS, **overrides)  # --replay plays the sample's
+    app = create_app(scenarios=scenario_source(live), **overrides)  # the sample's scenarios
     check_startup(app)  # a broken site or database: one line and exit 2, not a traceback
     settings = app.state.settings
     print_token(app)

@@ -116,6 +116,11 @@ def _watch_once(args, site, sink, progress, session: str, index0: int) -> int:
     )
     if progress.total is None and pipe.reader.n_frames:
         progress.total = pipe.reader.n_frames
+    frames = getattr(args, "frame_poster", None)
+    if frames is not None:  # --frames: keep the decoded frames the detections belong to
+        from demtrack.server.video.frame_keeper import FrameKeeper
+
+        pipe.reader = FrameKeeper(pipe.reader, keep=pipe.lag + 4, klv=True)  # type: ignore[assignment]
     source = _source_id(args.source)
     batch: Batch | None = None
     count = 0
@@ -127,6 +132,9 @@ def _watch_once(args, site, sink, progress, session: str, index0: int) -> int:
             if batch is None:
                 batch = Batch(batch_key(args.sensor, source, index, session))
             batch.detections += [detection_record(d) for d in res.detections]
+            if frames is not None and res.index >= 0 and res.index in pipe.reader.frames:
+                image = pipe.reader.frames[res.index].image
+                frames.offer(res.t_s, image, [d.bbox for d in res.detections])
             if res.klv:
                 batch.poses += _pose_records(res.klv, site, args.sensor)
             count += 1
@@ -159,6 +167,11 @@ def _run(args: argparse.Namespace) -> int:
     def log(msg: str) -> None:
         sys.stderr.write(("\n" if not args.quiet and not live else "") + f"demtrack watch: {msg}\n")
 
+    if args.frames and not args.server:
+        raise InputFileError("--frames posts frames to a console server: give --server URL")
+    if args.batch_frames is None:  # with frames, detections follow their frame closely
+        args.batch_frames = 2 if args.frames else 25
+    args.frame_poster = None
     sink: Any
     if args.server:
         sink = ServerSink(args.server, args.sensor, args.token, give_up_s=args.give_up, log=log)
@@ -166,6 +179,12 @@ def _run(args: argparse.Namespace) -> int:
         sink = JsonlSink(Path(args.output))
     progress = _Progress(None, enabled=not args.quiet)
     index, failures, delay = 0, 0, 1.0
+    if args.frames:
+        from demtrack.commands.watch_frames import FramePoster
+
+        args.frame_poster = FramePoster(
+            args.server, args.sensor, args.token, rate_hz=args.frame_rate, log=log
+        )
     try:
         while True:
             session = f"{int(time.time() * 1000)}" if live else ""
@@ -191,7 +210,11 @@ def _run(args: argparse.Namespace) -> int:
             sink.close()
         finally:
             summary = progress.done()
+            if args.frame_poster is not None:
+                args.frame_poster.close()
     sent = f"{sink.n_detections} detections" + (f", {sink.n_poses} poses" if sink.n_poses else "")
+    if args.frame_poster is not None:
+        sent += f", {args.frame_poster.n_posted} frames"
     where = args.server or args.output
     print(f"watched {args.source}: {summary}; {sent} to {where}")
     return 0
@@ -240,9 +263,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--batch-frames",
         type=positive_int,
-        default=25,
+        default=None,
         metavar="N",
-        help="frames per posted batch (default 25)",
+        help="frames per posted batch (default 25; 2 with --frames)",
     )
     p.add_argument(
         "--reconnects",
@@ -262,6 +285,18 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--image-only",
         action="store_true",
         help="classify by image shape alone, not by size in metres on the DEM",
+    )
+    p.add_argument(
+        "--frames",
+        action="store_true",
+        help="also post the video frames (JPEG, <= 1280 px wide) for the console's camera panel",
+    )
+    p.add_argument(
+        "--frame-rate",
+        type=positive,
+        default=4.0,
+        metavar="HZ",
+        help="with --frames: most frames per second of video (default 4)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_run)

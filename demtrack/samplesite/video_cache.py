@@ -57,6 +57,10 @@ class SampleVideos:
         give such videos their own folder.
     sensors : tuple of str, optional
         Only these cameras have videos (the others play no part in the replay); default all.
+    warm_up_s : float
+        The detector's first seconds of each clip (at most the lead-in) only learn the
+        scene: their detections are not sent (on the sample videos the background model's
+        first 10 s give 2-10 false blobs a frame; nothing moves then anyway).
     log : callable
         Receives one line per rendered video (and the renderer's progress).
     base : SampleScenarios
@@ -67,6 +71,7 @@ class SampleVideos:
     lead_in_s: float = 15.0
     span_s: float | None = None
     sensors: tuple[str, ...] | None = None
+    warm_up_s: float = 10.0
     log: Callable[[str], None] = field(default=lambda _line: None)
     base: SampleScenarios = SAMPLE_SCENARIOS
     rendered_s: dict[str, float] = field(default_factory=dict)
@@ -132,6 +137,7 @@ class SampleVideos:
         return VideoClip(
             path, sensor, float(header["scenario_start_s"]),
             float(header["t_from_s"]), float(header["t_to_s"]),
+            detect_from_s=float(header["t_from_s"]) + min(self.warm_up_s, float(self.lead_in_s)),
         )  # fmt: skip
 
 

@@ -1,4 +1,4 @@
-"""``/api/sensors/{id}/frame``: cameras' newest video frames, in and out.
+"""``/api/sensors/{id}/frame``, ``/api/frames``: cameras' newest video frames, in and out.
 
 Thin: the logic is :mod:`demtrack.server.video.frames_http`, the frames are held by the
 app's :class:`~demtrack.server.video.frame_book.FrameBook`.
@@ -12,13 +12,13 @@ from fastapi import APIRouter, Depends, Header, Request
 from starlette.responses import Response
 
 from ..video.frame_book import FrameBook
-from ..video.frames_http import frame_book, frame_response, put_frame
+from ..video.frames_http import frame_book, frame_index, frame_response, put_frame
 from .deps import OPERATOR, READER, StateDep
 from .errors import error_responses
 
 __all__ = ["router"]
 
-router = APIRouter(prefix="/api/sensors", tags=["video"])
+router = APIRouter(tags=["video"])
 
 
 async def _book(request: Request, state: StateDep) -> FrameBook:
@@ -30,7 +30,7 @@ BookDep = Annotated[FrameBook, Depends(_book)]
 
 
 @router.put(
-    "/{sensor_id}/frame",
+    "/api/sensors/{sensor_id}/frame",
     dependencies=OPERATOR,
     responses=error_responses(401, 404, 413, 422),
     summary="Post the camera's newest video frame (JPEG)",
@@ -62,7 +62,7 @@ async def put_sensor_frame(
 
 
 @router.get(
-    "/{sensor_id}/frame.jpg",
+    "/api/sensors/{sensor_id}/frame.jpg",
     dependencies=READER,
     response_class=Response,
     responses={
@@ -83,3 +83,25 @@ async def get_sensor_frame(
     server has no frame of that sensor (the console shows the still).
     """
     return frame_response(book, sensor_id, if_none_match)
+
+
+@router.get(
+    "/api/frames",
+    dependencies=READER,
+    response_class=Response,
+    responses={
+        **error_responses(401),
+        200: {"content": {"application/json": {}}, "description": "each camera's newest frame"},
+        304: {"description": "no frame changed since the If-None-Match tag"},
+    },
+    summary="Which cameras have live frames, and their tags",
+)
+async def list_frames(
+    book: BookDep, if_none_match: Annotated[str | None, Header()] = None
+) -> Response:
+    """Each camera's newest frame: its ``etag``, ``t_s`` and ``time_utc``, pixel size.
+
+    One poll for every camera (the console's): 304 with no body while no frame changed;
+    then only the cameras whose tag changed need their ``frame.jpg``.
+    """
+    return frame_index(book, if_none_match)

@@ -7,6 +7,8 @@ frame when known); :mod:`.frames_http` is the logic of ``PUT /api/sensors/{id}/f
 :mod:`.source` is what a video replay needs from its caller (rendered or recorded videos
 of the replayed scenarios); :mod:`.replay_video` decodes those videos in the replay's
 clock, runs the video detector (:mod:`demtrack.core.video`) and feeds the detections to
-the pipeline and the frames to the book. May import ``core`` and the server's ingest,
-settings and store layers; the API imports it, nothing below does.
+the pipeline and the frames to the book (:mod:`.frame_keeper` finds the frame a lagging
+detection belongs to); :mod:`.service` starts it from the settings. May import ``core``
+and the server's ingest, settings and store layers; the API imports it, nothing below
+does.
 """

@@ -131,6 +131,16 @@ class FrameBook:
             self.n_put += 1
         return frame
 
+    @property
+    def version(self) -> str:
+        """A quoted tag that changes whenever any frame is stored (or forgotten)."""
+        return f'"{self._id}-v{self._n}"'
+
+    def index(self) -> tuple[str, dict[str, StoredFrame]]:
+        """The book's version and its frames, read together."""
+        with self._lock:
+            return self.version, dict(self._frames)
+
     def get(self, sensor: str) -> StoredFrame | None:
         """``sensor``'s newest frame, or None."""
         return self._frames.get(sensor)
@@ -138,6 +148,7 @@ class FrameBook:
     def clear(self, sensor: str | None = None) -> None:
         """Forget one sensor's frame (or every frame)."""
         with self._lock:
+            self._n += 1
             if sensor is None:
                 self._frames.clear()
             else:

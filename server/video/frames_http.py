@@ -6,7 +6,9 @@
 /api/sensors/{id}/frame.jpg``: the newest frame with ``Cache-Control: no-store``, its
 ``ETag``, ``X-Frame-Time`` (ISO, milliseconds, UTC) and ``X-Frame-Time-S`` (UNIX
 seconds); ``If-None-Match`` with that tag answers 304 with no body; 404 while the
-server holds no frame of that sensor.
+server holds no frame of that sensor. ``GET /api/frames``: every camera's newest frame's
+tag and time in one small answer (the console polls it, then fetches only the frames that
+changed), 304 while nothing changed.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from demtrack.core.io.times import format_utc, parse_time_value
 
 from .frame_book import FrameBook, StoredFrame
 
-__all__ = ["frame_book", "frame_response", "put_frame"]
+__all__ = ["frame_book", "frame_index", "frame_response", "put_frame"]
 
 _BOOK_LOCK = threading.Lock()
 
@@ -129,3 +131,24 @@ def frame_response(book: FrameBook, sensor: str, if_none_match: str | None) -> R
     if _matches(if_none_match, frame.etag):
         return Response(status_code=304, headers=_headers(frame))
     return Response(frame.jpeg, media_type="image/jpeg", headers=_headers(frame))
+
+
+def frame_index(book: FrameBook, if_none_match: str | None) -> Response:
+    """``{"frames": {sensor: {"etag", "t_s", "time_utc", "width", "height"}}}`` or 304."""
+    version, frames = book.index()
+    headers = {"Cache-Control": "no-store", "ETag": version}
+    if _matches(if_none_match, version):
+        return Response(status_code=304, headers=headers)
+    body = {
+        "frames": {
+            s: {
+                "etag": f.etag,
+                "t_s": f.t_s,
+                "time_utc": format_utc(f.t_s),
+                "width": f.width,
+                "height": f.height,
+            }
+            for s, f in sorted(frames.items())
+        }
+    }
+    return Response(json.dumps(body), media_type="application/json", headers=headers)

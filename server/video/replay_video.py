@@ -19,9 +19,11 @@ The scenarios play one after another (a camera shows one video at a time), each 
 clips' first frame to their last, ``gap_s`` apart, looping. A scenario's time ``tau`` in
 loop ``k`` plays at ``t0_s + k * period + offset + (tau - t_from)``; local ids of each
 clip are offset (``clip * 100000``) so a later loop never continues an earlier one's
-blob track. When decoding and detecting cannot keep up, the player waits for the frames
-(its lateness is :attr:`VideoReplay.late_s`) and then moves its clock on, so the replay
-slows rather than bursts.
+blob track. A clip's frames before its ``detect_from_s`` (the sample videos' lead-in, the
+detector learning the scene) are shown but their detections are not sent. When decoding
+and detecting cannot keep up, the player waits for the frames (its lateness is
+:attr:`VideoReplay.late_s`) and then moves its clock on, so the replay slows rather than
+bursts.
 """
 
 from __future__ import annotations
@@ -33,7 +35,6 @@ import math
 import queue
 import threading
 import time
-from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -46,6 +47,7 @@ from demtrack.core.video.pipeline import VideoDetections, make_detector, site_ma
 from demtrack.core.video.reader import Frame, VideoReader
 
 from .frame_book import FrameBook
+from .frame_keeper import FrameKeeper
 from .jpeg import encode_jpeg
 from .source import VideoClip
 
@@ -80,25 +82,6 @@ def playlist(spans: Sequence[tuple[float, float]], gap_s: float) -> tuple[list[f
         offsets.append(at)
         at += max(t_to - t_from, 0.0) + gap_s
     return offsets, at
-
-
-class _KeepFrames:
-    """A reader that remembers its last frames by index (for the lagging detections)."""
-
-    def __init__(self, reader: VideoReader, keep: int) -> None:
-        self.reader = reader
-        self.frames: dict[int, Frame] = {}
-        self._order: deque[int] = deque()
-        self.keep = keep
-
-    def items(self) -> Iterator[Any]:
-        for item in self.reader.items(klv=False):
-            if isinstance(item, Frame):
-                self.frames[item.index] = item
-                self._order.append(item.index)
-                while len(self._order) > self.keep:
-                    self.frames.pop(self._order.popleft(), None)
-            yield item
 
 
 class VideoReplay:
@@ -298,14 +281,16 @@ class VideoReplay:
             )
         mask = load_mask(str(mask_path), reader.size) if mask_path.is_file() else None
         det = make_detector(self.detector, reader.size, fps=reader.fps, mask=mask)
-        keep = _KeepFrames(reader, keep=64)
+        keep = FrameKeeper(reader, keep=64)
         pipe = VideoDetections(keep, det, clip.sensor, classifier)  # type: ignore[arg-type]
         base = n * LOCAL_ID_STRIDE
         for res in pipe.results():
             if res.index < 0:
                 continue
-            t = round(res.t_s - clip.scenario_start_s + shift, 6)
-            recs = tuple(_record(d, t, base) for d in res.detections)
+            tau = res.t_s - clip.scenario_start_s
+            t = round(tau + shift, 6)
+            warming = clip.detect_from_s is not None and tau < clip.detect_from_s - 1e-6
+            recs = () if warming else tuple(_record(d, t, base) for d in res.detections)
             yield t, recs, keep.frames.get(res.index)
             if self._stop.is_set():
                 return
@@ -342,6 +327,14 @@ class VideoReplay:
                 self.late_s = max(self.late_s, -wait)
                 self.n_clock_moves += 1
                 wall0 += -wait
+                if self.n_clock_moves == 1:
+                    busy = self.stats()["busy_ms_per_frame"]
+                    log.warning(
+                        "video replay cannot keep up at %g x: decoding and detecting take"
+                        " %s ms a frame per camera; it runs slower (a lower --speed keeps up)",
+                        self.speed,
+                        "/".join(f"{v:.0f}" for v in busy.values()),
+                    )
             elif wait < 0:
                 self.late_s = max(self.late_s, -wait)
             batch = [item]

@@ -37,6 +37,10 @@ class VideoClip:
         ``t`` is scenario time ``t - scenario_start_s``.
     t_from_s, t_to_s : float
         Scenario seconds the clip covers (first and last frame).
+    detect_from_s : float, optional
+        Scenario seconds before which the detector only learns the scene: its detections
+        of earlier frames are not sent (a background model's first frames are mostly
+        false alarms; a camera gateway warms up the same way). None: send all.
     """
 
     path: Path
@@ -44,6 +48,7 @@ class VideoClip:
     scenario_start_s: float
     t_from_s: float
     t_to_s: float
+    detect_from_s: float | None = None
 
 
 @runtime_checkable

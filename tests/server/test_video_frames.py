@@ -152,3 +152,24 @@ def test_book_keeps_one_frame_per_sensor_and_unique_tags():
         book.put("c", jpeg, 1.0)
     with pytest.raises(VideoError, match="finite"):
         book.put("a", jpeg, float("nan"))
+
+
+def test_frame_index_lists_tags_and_answers_304_until_a_frame_changes(client):
+    empty = client.get("/api/frames", headers=AUTH)
+    assert empty.status_code == 200 and empty.json() == {"frames": {}}
+    tag0 = empty.headers["etag"]
+    put(client, "cam2", solid_jpeg((1, 1, 1)), T0 + 2)
+    idx = client.get("/api/frames", headers={**AUTH, "If-None-Match": tag0})
+    assert idx.status_code == 200 and idx.headers["cache-control"] == "no-store"
+    (entry,) = idx.json()["frames"].values()
+    frame = client.get("/api/sensors/cam2/frame.jpg", headers=AUTH)
+    assert entry["etag"] == frame.headers["etag"]
+    assert entry["time_utc"] == "2026-12-01T14:30:02.000Z" and entry["width"] == 320
+    tag1 = idx.headers["etag"]
+    assert tag1 != tag0
+    same = client.get("/api/frames", headers={**AUTH, "If-None-Match": tag1})
+    assert same.status_code == 304 and same.content == b""
+    put(client, "cam1", solid_jpeg((2, 2, 2)), T0 + 3)
+    new = client.get("/api/frames", headers={**AUTH, "If-None-Match": tag1})
+    assert new.status_code == 200 and sorted(new.json()["frames"]) == ["cam1", "cam2"]
+    assert client.get("/api/frames").status_code == 401

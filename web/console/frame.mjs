@@ -50,7 +50,8 @@ function redraw(t) {
     } else {
       // A box whose track has not arrived yet (tracks lag the fixes by the server's reorder
       // lag) takes the track of the box it continues (cameras.mjs linkBoxes).
-      const fixes = store.fixesNear(sid, t, BOX_WINDOW_S);
+      // Over a live video frame (video.mjs): the boxes of the frame's own moment.
+      const fixes = store.fixesNear(sid, panel.videoT ?? t, panel.videoWindowS ?? BOX_WINDOW_S);
       const links = linkBoxes(store.fixes.get(sid) || [], fixes, (d) => store.trackOfDetection(d));
       panel.draw(fixes, (d) => links.get(d), ui.selectedId, boxVisible);
     }

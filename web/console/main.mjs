@@ -30,6 +30,7 @@ import { buildFilters, buildLayerList } from "./sidebar.mjs";
 import { store, timeline, ui } from "./state.mjs";
 import { Stream } from "./stream.mjs";
 import { $ } from "./util.mjs";
+import { installVideo } from "./video.mjs";
 import { VisibilityLayers } from "./visibility.mjs";
 
 let stream = null;
@@ -104,6 +105,7 @@ async function boot() {
     : Promise.resolve();
   const markers = loadMarkers(); // stored markers (markers.mjs); the stream keeps them current
   const heads = installPtz(); // the active heads' strips in the camera panels (ptz.mjs)
+  installVideo(); // live frames over the stills where the server has them (video.mjs)
   await Promise.all([ortho, relief, roads, images, tracks, events, markers, heads]);
   if (!store.events.length) { // no event log on this server (or none yet)
     eventsFromTracks(store.tracks.values()).forEach((e) => store.applyEvent(e));
