@@ -156,11 +156,14 @@ class BlobClassifier:
 
         NaN and None where the foot ray meets no ground.
         """
-        cam = self.camera
+        cam: Any = self.camera
+        geo: Any = self.geolocator
+        if cam is None or geo is None:
+            raise VideoError("metric sizes need a camera and a geolocator")
         w_img, h_img = cam.intrinsics.width, cam.intrinsics.height
         u = np.array([min(max(b.foot_px[0], -0.5), w_img - 0.5) for b in blobs])
         v = np.array([min(max(b.foot_px[1], -0.5), h_img - 0.5) for b in blobs])
-        hits = self.geolocator.locate_pixels([(cam, u, v)])
+        hits = geo.locate_pixels([(cam, u, v)])
         out: list[tuple[float, float, tuple[float, float, float] | None]] = []
         for i, b in enumerate(blobs):
             lo, hi = int(hits.offsets[i]), int(hits.offsets[i + 1])
@@ -178,7 +181,8 @@ class BlobClassifier:
         z = np.arange(0.0, 12.01, 0.05)
         pts = np.repeat(p[None, :], z.size, axis=0)
         pts[:, 2] += z
-        _, vz, _ = self.camera.project(pts)
+        cam: Any = self.camera
+        _, vz, _ = cam.project(pts)
         ok = np.isfinite(vz)
         if ok.sum() < 2:
             return math.nan
@@ -191,13 +195,14 @@ class BlobClassifier:
 
     def _width_m(self, b: Blob, p: np.ndarray) -> float:
         """Box width over the image scale (px/m) across the line of sight at ``p`` (m)."""
-        los = p - np.asarray(self.camera.position_enu, dtype=np.float64)
+        cam: Any = self.camera
+        los = p - np.asarray(cam.position_enu, dtype=np.float64)
         across = np.array([los[1], -los[0], 0.0])
         n = np.linalg.norm(across)
         if n == 0:
             return math.nan
         across /= n
-        u, v, _ = self.camera.project(np.stack([p - 0.5 * across, p + 0.5 * across]))
+        u, v, _ = cam.project(np.stack([p - 0.5 * across, p + 0.5 * across]))
         px_per_m = math.hypot(u[1] - u[0], v[1] - v[0])
         if not px_per_m > 0:
             return math.nan
