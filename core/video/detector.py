@@ -183,8 +183,8 @@ class VsamDetector:
         variance moves slowly.
         """
         if (self._thr is None or self.n_frames % 4 == 0) and self._var is not None:
-            thr = cv2.sqrt(self._var)
-            thr *= np.float32(self.k)  # in place: no temporaries
+            thr: np.ndarray = np.asarray(cv2.sqrt(self._var), dtype=np.float32)
+            np.multiply(thr, np.float32(self.k), out=thr)  # in place: no temporaries
             np.maximum(thr, np.float32(self.min_diff), out=thr)
             thr8 = np.floor(np.minimum(thr, 255.0)).astype(np.uint8)
             self._thr = (thr, thr8)
