@@ -114,7 +114,7 @@ class VsamDetector:
         absorb_s: float = 10.0,
         hold_s: float = 5.0,
         restless: float = 0.12,
-        restless_s: float = 3.0,
+        restless_s: float = 10.0,
         validate: bool = True,
         downscale: int = 1,
     ) -> None:
@@ -299,7 +299,11 @@ class VsamDetector:
                 out.append(ok)
                 if ok:
                     stamps.append(last)
-                else:
+                elif not any(
+                    mv2 and iou(box, b2) > 0.0 for b2, mv2 in zip(boxes, is_moving, strict=True)
+                ):
+                    # learnt at once, unless it touches a moving object's box: a still
+                    # piece of a big uniform body (its roof) must not become background
                     rejected.append(c)
             state["stamps"], state["rejected"] = stamps, rejected
             return out
