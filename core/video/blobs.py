@@ -101,7 +101,10 @@ def load_mask(path: str, size: tuple[int, int]) -> np.ndarray:
     img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
     if img is None:
         raise VideoError(f"cannot read mask {path} (a PNG, white = ignore)")
-    return prepare_mask(img > 127, size)
+    mask = prepare_mask(img > 127, size)
+    if mask is None:  # cannot happen: a mask was given
+        raise VideoError(f"cannot read mask {path}")
+    return mask
 
 
 def prepare_mask(mask: np.ndarray | None, size: tuple[int, int]) -> np.ndarray | None:

@@ -14,8 +14,11 @@ height are turned into metres at that point:
 
 Each blob is scored against size prototypes in log-space (a ratio error is what matters):
 a person 0.6 m wide, 1.7 m tall (adult stature 1.5-1.9 m, shoulder width 0.4-0.5 m plus
-the stride; ANSUR II); a car side-on 4.5 m x 1.5 m and end-on 1.8 m x 1.5 m (a typical
-European passenger car: length 4.2-4.8 m, width 1.75-1.85 m, height 1.45-1.55 m). The
+the stride; ANSUR II); a car side-on 4.5 m x 1.5 m, end-on 1.8 m x 1.5 m, at 45 degrees
+4.4 m wide (a typical European passenger car: length 4.2-4.8 m, width 1.75-1.85 m,
+height 1.45-1.55 m). The
+prototype's height is compared as it appears from the camera (:func:`apparent_height_m`:
+from above, the top of a deep body lies beyond the foot and looks higher). The
 prototype spread ``size_sigma`` 0.35 in log units (+-42 % at 1 sigma) covers children,
 vans, partial occlusion and box slack. Farther than ``clutter_sigma`` from every
 prototype is clutter (a swaying crown, a shadow, a bird). Without a camera and DEM the
@@ -37,6 +40,7 @@ from .blobs import Blob
 
 __all__ = [
     "CLUTTER",
+    "apparent_height_m",
     "PROTOTYPES",
     "BlobClass",
     "BlobClassifier",
@@ -45,12 +49,28 @@ __all__ = [
 
 CLUTTER = "clutter"
 
-#: (class, width_m, height_m): the size prototypes (see the module docstring).
-PROTOTYPES: tuple[tuple[str, float, float], ...] = (
-    ("human", 0.6, 1.7),
-    ("vehicle", 4.5, 1.5),
-    ("vehicle", 1.8, 1.5),
+#: (class, width_m, height_m, depth_m): the size prototypes (see the module docstring);
+#: depth is the extent along the line of sight (a car side-on is 1.8 m deep, end-on
+#: 4.5 m, at 45 degrees 4.4 m wide and deep).
+PROTOTYPES: tuple[tuple[str, float, float, float], ...] = (
+    ("human", 0.6, 1.7, 0.4),
+    ("vehicle", 4.5, 1.5, 1.8),
+    ("vehicle", 1.8, 1.5, 4.5),
+    ("vehicle", 4.4, 1.5, 4.4),
 )
+
+
+def apparent_height_m(height_m: float, depth_m: float, above_m: float, reach_m: float) -> float:
+    """The height on the foot point's vertical that a box of this depth appears to have.
+
+    Seen from ``above_m`` over the foot at horizontal range ``reach_m``, the far top edge
+    of a body ``depth_m`` deep and ``height_m`` tall lies on the ray that crosses the
+    foot's vertical at ``above - (above - height) * reach / (reach + depth)``: a car seen
+    from above looks taller than it is by its roof's depth (a level view: its height).
+    """
+    if above_m <= height_m or reach_m <= 0:
+        return height_m
+    return above_m - (above_m - height_m) * reach_m / (reach_m + depth_m)
 
 
 def dispersedness(perimeter_px: float, area_px: float) -> float:
@@ -131,9 +151,14 @@ class BlobClassifier:
         return out
 
     def _by_size(self, w_m: float, h_m: float, foot) -> BlobClass:
+        # camera height above the foot and horizontal range to it (m)
+        cam = np.asarray(self.camera.position_enu, dtype=np.float64)  # type: ignore[union-attr]
+        above = float(cam[2] - foot[2])
+        reach = float(math.hypot(cam[0] - foot[0], cam[1] - foot[1]))
         best, best_d = CLUTTER, math.inf
-        for cls, pw, ph in PROTOTYPES:
-            d = math.hypot(math.log(w_m / pw), math.log(h_m / ph)) / self.size_sigma
+        for cls, pw, ph, depth in PROTOTYPES:
+            ph_seen = apparent_height_m(ph, depth, above, reach)
+            d = math.hypot(math.log(w_m / pw), math.log(h_m / ph_seen)) / self.size_sigma
             if d < best_d:
                 best, best_d = cls, d
         if best_d > self.clutter_sigma:
@@ -156,11 +181,14 @@ class BlobClassifier:
 
         NaN and None where the foot ray meets no ground.
         """
-        cam = self.camera
+        cam: Any = self.camera
+        geo: Any = self.geolocator
+        if cam is None or geo is None:
+            raise VideoError("metric sizes need a camera and a geolocator")
         w_img, h_img = cam.intrinsics.width, cam.intrinsics.height
         u = np.array([min(max(b.foot_px[0], -0.5), w_img - 0.5) for b in blobs])
         v = np.array([min(max(b.foot_px[1], -0.5), h_img - 0.5) for b in blobs])
-        hits = self.geolocator.locate_pixels([(cam, u, v)])
+        hits = geo.locate_pixels([(cam, u, v)])
         out: list[tuple[float, float, tuple[float, float, float] | None]] = []
         for i, b in enumerate(blobs):
             lo, hi = int(hits.offsets[i]), int(hits.offsets[i + 1])
@@ -178,7 +206,8 @@ class BlobClassifier:
         z = np.arange(0.0, 12.01, 0.05)
         pts = np.repeat(p[None, :], z.size, axis=0)
         pts[:, 2] += z
-        _, vz, _ = self.camera.project(pts)
+        cam: Any = self.camera
+        _, vz, _ = cam.project(pts)
         ok = np.isfinite(vz)
         if ok.sum() < 2:
             return math.nan
@@ -191,13 +220,14 @@ class BlobClassifier:
 
     def _width_m(self, b: Blob, p: np.ndarray) -> float:
         """Box width over the image scale (px/m) across the line of sight at ``p`` (m)."""
-        los = p - np.asarray(self.camera.position_enu, dtype=np.float64)
+        cam: Any = self.camera
+        los = p - np.asarray(cam.position_enu, dtype=np.float64)
         across = np.array([los[1], -los[0], 0.0])
         n = np.linalg.norm(across)
         if n == 0:
             return math.nan
         across /= n
-        u, v, _ = self.camera.project(np.stack([p - 0.5 * across, p + 0.5 * across]))
+        u, v, _ = cam.project(np.stack([p - 0.5 * across, p + 0.5 * across]))
         px_per_m = math.hypot(u[1] - u[0], v[1] - v[0])
         if not px_per_m > 0:
             return math.nan

@@ -114,7 +114,7 @@ class VsamDetector:
         absorb_s: float = 10.0,
         hold_s: float = 5.0,
         restless: float = 0.12,
-        restless_s: float = 3.0,
+        restless_s: float = 10.0,
         validate: bool = True,
         downscale: int = 1,
     ) -> None:
@@ -155,6 +155,7 @@ class VsamDetector:
         self._prev: list[np.ndarray] = []  # I_{n-1}, I_{n-2} (uint8)
         self._thr: tuple[np.ndarray, np.ndarray] | None = None
         self._still = np.zeros(self.work_size[::-1], np.uint16)  # frames fg without motion
+        self._one16 = np.ones_like(self._still)
         self._kept: list[tuple[float, float, float, float]] = []
         self._last_motion: list[int] = []  # frame of each kept box's last motion
         self._stamps: list[int] = []
@@ -182,7 +183,9 @@ class VsamDetector:
         variance moves slowly.
         """
         if (self._thr is None or self.n_frames % 4 == 0) and self._var is not None:
-            thr = cv2.max(cv2.multiply(cv2.sqrt(self._var), self.k), self.min_diff)
+            thr: np.ndarray = np.asarray(cv2.sqrt(self._var), dtype=np.float32)
+            np.multiply(thr, np.float32(self.k), out=thr)  # in place: no temporaries
+            np.maximum(thr, np.float32(self.min_diff), out=thr)
             thr8 = np.floor(np.minimum(thr, 255.0)).astype(np.uint8)
             self._thr = (thr, thr8)
         if self._thr is None:
@@ -296,7 +299,11 @@ class VsamDetector:
                 out.append(ok)
                 if ok:
                     stamps.append(last)
-                else:
+                elif not any(
+                    mv2 and iou(box, b2) > 0.0 for b2, mv2 in zip(boxes, is_moving, strict=True)
+                ):
+                    # learnt at once, unless it touches a moving object's box: a still
+                    # piece of a big uniform body (its roof) must not become background
                     rejected.append(c)
             state["stamps"], state["rejected"] = stamps, rejected
             return out
@@ -321,9 +328,10 @@ class VsamDetector:
         # Frames each pixel has been foreground without moving (reset by motion or by
         # being background); checked once a second, a pixel still for absorb_s is learnt.
         still = cv2.bitwise_and(fg, cv2.bitwise_not(moving))
-        self._still = cv2.bitwise_and(cv2.add(self._still, 1), 0xFFFF, mask=still)
+        grown = cv2.add(self._still, self._one16)
+        self._still = cv2.bitwise_and(grown, grown, mask=still)  # 0 where not still
         if self.n_frames % self._check_every == 0:
-            absorbed = cv2.compare(self._still, self.absorb_frames, cv2.CMP_GE)
-            if cv2.countNonZero(absorbed):
-                cv2.copyTo(img, absorbed, mu)
-                self._still[absorbed > 0] = 0
+            absorbed = self._still >= self.absorb_frames
+            if absorbed.any():
+                mu[absorbed] = img[absorbed]
+                self._still[absorbed] = 0

@@ -214,11 +214,13 @@ def video_detections(
     latency_s: float = 0.0,
     metric: bool = True,
     threads: int = 0,
+    timeout_s: float = 5.0,
 ) -> VideoDetections:
     """The assembled pipeline for one camera of a site.
 
     ``mask`` is a PNG path or a boolean array (True = ignore); None looks for the site's
-    ``masks/<sensor>.png``. ``metric`` classifies by size in metres (the camera and the
+    ``masks/<sensor>.png``. ``timeout_s``: a live stream's open and read timeout.
+    ``metric`` classifies by size in metres (the camera and the
     site's DEM); False by image cues alone.
 
     Raises
@@ -231,7 +233,12 @@ def video_detections(
     sensor = site.sensor(sensor_id)
     gray = not detector.startswith(("onnx:", "mog2", "knn"))
     reader = VideoReader(
-        source, start_utc_s=start_utc_s, gray=gray, latency_s=latency_s, threads=threads
+        source,
+        start_utc_s=start_utc_s,
+        gray=gray,
+        latency_s=latency_s,
+        threads=threads,
+        timeout_s=timeout_s,
     )
     cam = sensor.camera
     w, h = cam.intrinsics.width, cam.intrinsics.height

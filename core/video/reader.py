@@ -130,6 +130,7 @@ class VideoReader:
         if not self.live and not Path(self.source).is_file():
             raise VideoError(f"video file not found: {self.source}")
         container = self._open()
+        self._live_container: Any = None
         try:
             stream = self._video_stream(container)
             rate = stream.average_rate or stream.guessed_rate or stream.base_rate
@@ -141,7 +142,12 @@ class VideoReader:
             self.n_frames: int | None = int(stream.frames) if stream.frames else None
             self.has_klv = any(s.type == "data" for s in container.streams)
             self.start_utc_s: float | None = self._file_start(container, stream)
-        finally:
+        except BaseException:
+            container.close()
+            raise
+        if self.live:  # a live stream is read on from this connection, not reopened
+            self._live_container = container
+        else:
             container.close()
 
     # ------------------------------------------------------------------ opening
@@ -217,7 +223,7 @@ class VideoReader:
         """
         import av
 
-        container = self._open()
+        container, self._live_container = self._live_container or self._open(), None
         try:
             vstream = self._video_stream(container)
             wanted = [vstream] if frames else []

@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from .common import add_site_argument, non_negative, positive, positive_int
+from .common import add_site_argument, non_negative, non_negative_int, positive, positive_int
 
 __all__ = ["batch_key", "register"]
 
@@ -113,6 +113,7 @@ def _watch_once(args, site, sink, progress, session: str, index0: int) -> int:
         mask=args.mask,
         latency_s=args.latency,
         metric=not args.image_only,
+        timeout_s=args.timeout,
     )
     if progress.total is None and pipe.reader.n_frames:
         progress.total = pipe.reader.n_frames
@@ -257,6 +258,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="S",
         help="live streams: seconds from capture to arrival (default 0)",
     )
+    p.add_argument(
+        "--timeout",
+        type=positive,
+        default=5.0,
+        metavar="S",
+        help="live streams: a stream silent this long has stalled (default 5)",
+    )
     p.add_argument("--server", metavar="URL", help="console server to post to")
     p.add_argument("--token", metavar="T", help="the server's operator token")
     p.add_argument("-o", "--output", metavar="FILE.jsonl", help="write detections here instead")
@@ -269,7 +277,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--reconnects",
-        type=int,
+        type=non_negative_int,
         default=10,
         metavar="N",
         help="live streams: reconnect this often after a stall (default 10)",

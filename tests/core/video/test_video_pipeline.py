@@ -125,3 +125,15 @@ def test_a_video_of_the_wrong_size_is_refused(site, tmp_path):
     clip = write_video(tmp_path / "small.mp4", [], n_frames=3)
     with pytest.raises(VideoError, match="calibrated for 1280x720"):
         video_detections(site, "cam1", clip.path)
+
+
+def test_apparent_height_of_a_deep_body_seen_from_above():
+    from demtrack.core.video.classify import apparent_height_m
+
+    # camera 10 m above the foot, 15 m away; the far top edge (1.5 m up, 4.5 m beyond)
+    # lies on the ray through (15 + 4.5, 1.5): at range 15 it is 10 - 8.5 * 15 / 19.5 up
+    assert apparent_height_m(1.5, 4.5, 10.0, 15.0) == pytest.approx(10 - 8.5 * 15 / 19.5)
+    assert apparent_height_m(1.5, 0.0, 10.0, 15.0) == pytest.approx(1.5)  # no depth
+    assert apparent_height_m(1.7, 0.4, 1.0, 30.0) == 1.7  # a camera below the top: level
+    # far away the roof's depth hardly shows
+    assert apparent_height_m(1.5, 4.5, 10.0, 2000.0) == pytest.approx(1.5, abs=0.02)
