@@ -27,11 +27,30 @@ __all__ = ["BAR", "register"]
 BAR = {"precision": 0.9, "recall": 0.9, "class_accuracy": 0.95, "rmse_gap_m": 0.3, "id_switches": 0}
 
 
-def _detect(site: Any, sensor: str, video: Path, detector: str) -> tuple[list, float]:
+def _masks(items: list[str] | None, sensors: list[str]) -> dict[str, Path]:
+    """``--mask ID=FILE.png`` options as sensor -> mask file."""
+    from demtrack.core.errors import InputFileError
+
+    out = {}
+    for item in items or ():
+        sensor, sep, path = item.partition("=")
+        if not sep or not path:
+            raise InputFileError(f"--mask {item}: give ID=FILE.png")
+        if sensor not in sensors:
+            raise InputFileError(f"--mask {item}: {sensor} is not one of the --sensor ids")
+        if not Path(path).is_file():
+            raise InputFileError(f"--mask {item}: no such file")
+        out[sensor] = Path(path)
+    return out
+
+
+def _detect(
+    site: Any, sensor: str, video: Path, detector: str, mask: Path | None = None
+) -> tuple[list, float]:
     from demtrack.core.video.pipeline import detect_video
 
     clock = time.perf_counter()
-    dets = list(detect_video(site, sensor, str(video), detector=detector))
+    dets = list(detect_video(site, sensor, str(video), detector=detector, mask=mask))
     return dets, time.perf_counter() - clock
 
 
@@ -108,6 +127,7 @@ def _run(args: argparse.Namespace) -> int:
             f"give one --detections per --sensor, in the same order ({len(sensors)} sensors,"
             f" {len(saved)} detection files)"
         )
+    masks = _masks(args.mask, sensors)
     from demtrack.core.site.folder import load_site
     from demtrack.samplesite.scenarios import make_scenario
     from demtrack.samplesite.video_eval import (
@@ -135,7 +155,7 @@ def _run(args: argparse.Namespace) -> int:
         if saved:
             dets = _read_saved(saved[k], sensor)
         else:
-            dets, seconds = _detect(site, sensor, video, args.detector)
+            dets, seconds = _detect(site, sensor, video, args.detector, masks.get(sensor))
             speed.append((sensor, len(vt.frames) / seconds if seconds > 0 else math.inf))
         scores.append(score_detections(site, dets, vt, score_from_s=args.score_from))
         t_scored = scored_from(vt, args.score_from)
@@ -232,6 +252,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="FILE",
         help="score these saved detections (CSV or JSON Lines, e.g. from demtrack watch)"
         " instead of running the detector (repeatable, in --sensor order)",
+    )
+    p.add_argument(
+        "--mask",
+        action="append",
+        metavar="ID=FILE.png",
+        help="the detector's mask for a sensor (white = ignore, e.g. trees in wind; repeatable)",
     )
     p.add_argument(
         "--score-from",

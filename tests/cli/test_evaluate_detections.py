@@ -127,6 +127,13 @@ def test_mistakes_are_one_line(capsys, sample_site_dir, clip, tmp_path):
     assert status == 2 and "is vehicle-run from cam1, not vehicle-run from cam2" in err
     status, _, err = run(capsys, *base, "--sensor", "cam1", "--video", tmp_path / "none.mp4")
     assert status == 2 and "no such file" in err
+    for mask, message in (
+        ("cam9=m.png", "cam9 is not one of the --sensor ids"),
+        ("cam1", "ID=FILE.png"),
+        ("cam1=none.png", "no such file"),
+    ):
+        status, _, err = run(capsys, *base, "--sensor", "cam1", "--video", clip, "--mask", mask)
+        assert status == 2 and message in err and len(err.strip().splitlines()) == 1
     lone = tmp_path / "lone.mp4"
     lone.write_bytes(clip.read_bytes())
     status, _, err = run(capsys, *base, "--sensor", "cam1", "--video", lone)
