@@ -446,22 +446,7 @@ def read_detections_csv(
             for name in (*CSV_COLUMNS, *POSE_FIELDS, "time")
             if name in header
         }
-        while True:
-            try:
-                row = next(reader)
-            except StopIteration:
-                break
-            except csv.Error as err:
-                col.n_records += 1
-                col.skip(reader.line_num + n_before, "malformed", f"unparsable CSV: {err}")
-                continue
-            if not row or all(not c.strip() for c in row):
-                continue
-            line = reader.line_num + n_before
-            if len(row) != len(header):
-                col.n_records += 1
-                col.skip(line, "malformed", f"{len(row)} fields, header has {len(header)}")
-                continue
+        for line, row in _csv_rows(reader, len(header), n_before, col):
             col.offer(line, functools.partial(_csv_record, row, pos, col))
     return col.result()
 
@@ -647,3 +632,32 @@ def write_detections_jsonl(dest: Source, detections: Iterable[Detection]) -> Non
                 rec["local_id"] = d.local_id
             buf.write(json.dumps(rec, allow_nan=False) + "\n")
         fh.write(buf.getvalue())
+
+
+def _csv_rows(
+    reader: Any, n_fields: int, n_before: int, col: Any
+) -> Iterator[tuple[int, list[str]]]:
+    """The data rows of a CSV after its header, each with its file line number.
+
+    Unparsable rows and rows with the wrong number of fields are counted on ``col`` (any
+    collector with ``n_records`` and ``skip(line, reason, message)``) as ``malformed``;
+    blank rows are passed over. ``n_before`` is the number of lines before the reader's
+    first (comment lines already consumed).
+    """
+    while True:
+        try:
+            row = next(reader)
+        except StopIteration:
+            return
+        except csv.Error as err:
+            col.n_records += 1
+            col.skip(reader.line_num + n_before, "malformed", f"unparsable CSV: {err}")
+            continue
+        if not row or all(not c.strip() for c in row):
+            continue
+        line = reader.line_num + n_before
+        if len(row) != n_fields:
+            col.n_records += 1
+            col.skip(line, "malformed", f"{len(row)} fields, header has {n_fields}")
+            continue
+        yield line, row

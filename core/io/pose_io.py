@@ -61,6 +61,7 @@ from .detections import (
     IngestIssue,
     IngestReport,
     Source,
+    _csv_rows,
     _epoch,
     _epoch_record,
     _float,
@@ -260,22 +261,7 @@ def read_poses_csv(
                 f"pose CSV lacks column(s) {', '.join(missing)}; header is {','.join(header)}"
             )
         pos = {name: i for i, name in enumerate(header)}
-        while True:
-            try:
-                row = next(reader)
-            except StopIteration:
-                break
-            except csv.Error as err:
-                col.n_records += 1
-                col.skip(reader.line_num + n_before, "malformed", f"unparsable CSV: {err}")
-                continue
-            if not row or all(not c.strip() for c in row):
-                continue
-            line = reader.line_num + n_before
-            if len(row) != len(header):
-                col.n_records += 1
-                col.skip(line, "malformed", f"{len(row)} fields, header has {len(header)}")
-                continue
+        for line, row in _csv_rows(reader, len(header), n_before, col):
 
             def get(name: str, row: list[str] = row) -> str:
                 return row[pos[name]].strip()
