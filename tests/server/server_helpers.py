@@ -97,3 +97,38 @@ def post_in_time_batches(client, records: list[dict[str, Any]], span_s: float = 
         r = client.post("/api/detections", headers=AUTH, json={"detections": records[k:j]})
         assert r.status_code == 200
         k = j
+
+
+def start_server(
+    site: Path, db: Path, *args: str, timeout_s: float = 90.0, **extra_env: str
+) -> tuple[Any, str]:
+    """``demtrack serve`` on a free port as a real process; its URL once uvicorn runs.
+
+    ``args`` are more ``serve`` options, ``extra_env`` more environment (the operator
+    token is :data:`TOKEN`). The output pipe is drained in a thread so the server never
+    blocks on it. Raises AssertionError (the process killed) when it does not start.
+    """
+    import os
+    import re
+    import subprocess
+    import sys
+    import threading
+    import time
+
+    env = {**os.environ, "DEMTRACK_TOKEN": TOKEN, **extra_env}
+    cmd = [sys.executable, "-m", "demtrack.cli", "serve", "--site", str(site), "--db", str(db)]
+    cmd += ["--port", "0", "--no-warm-up", "--log-level", "info", *args]
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env
+    )
+    assert proc.stdout is not None
+    deadline = time.monotonic() + timeout_s
+    for line in proc.stdout:
+        m = re.search(r"Uvicorn running on (http://[\d.]+:\d+)", line)
+        if m:
+            threading.Thread(target=proc.stdout.read, daemon=True).start()
+            return proc, m.group(1)
+        if time.monotonic() > deadline:
+            break
+    proc.kill()
+    raise AssertionError("server did not start")

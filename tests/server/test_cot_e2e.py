@@ -5,12 +5,9 @@ CE and LE (against the fixes' covariances) are checked, and the TCP stream recon
 from __future__ import annotations
 
 import json
-import os
 import re
 import socket
 import subprocess
-import sys
-import threading
 import time
 from pathlib import Path
 
@@ -18,7 +15,7 @@ import httpx2 as httpx
 import numpy as np
 import pytest
 from pyproj import Transformer
-from server_helpers import AUTH, TOKEN, walk
+from server_helpers import AUTH, start_server, walk
 
 from demtrack.core.io.cot import circular_error_m, event_from_xml
 from demtrack.core.site.folder import load_site
@@ -29,23 +26,7 @@ GROUP = "239.2.3.1"
 
 
 def start(site: Path, db: Path, cot: str) -> tuple[subprocess.Popen, str]:
-    env = {**os.environ, "DEMTRACK_TOKEN": TOKEN}
-    cmd = [sys.executable, "-m", "demtrack.cli", "serve", "--site", str(site), "--db", str(db)]
-    cmd += ["--port", "0", "--no-warm-up", "--log-level", "info", "--cot", cot]
-    proc = subprocess.Popen(
-        cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env
-    )
-    assert proc.stdout is not None
-    deadline = time.monotonic() + 60
-    for line in proc.stdout:
-        m = re.search(r"Uvicorn running on (http://[\d.]+:\d+)", line)
-        if m:
-            threading.Thread(target=proc.stdout.read, daemon=True).start()
-            return proc, m.group(1)
-        if time.monotonic() > deadline:
-            break
-    proc.kill()
-    raise AssertionError("server did not start")
+    return start_server(site, db, "--cot", cot, timeout_s=60)
 
 
 def feed(c: httpx.Client, t0: float, n: int = 30, key: str = "a") -> None:

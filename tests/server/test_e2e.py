@@ -5,58 +5,22 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import signal
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
 
 import httpx2 as httpx
 import pytest
-from server_helpers import AUTH, TOKEN, make_app, walk
+from server_helpers import AUTH, make_app, start_server, walk
 from starlette.testclient import TestClient
 
 pytestmark = pytest.mark.timeout(120)
 
 
 def start(site: Path, db: Path, **extra_env: str) -> tuple[subprocess.Popen, str]:
-    env = {**os.environ, "DEMTRACK_TOKEN": TOKEN, **extra_env}
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "demtrack.cli",
-            "serve",
-            "--site",
-            str(site),
-            "--db",
-            str(db),
-            "--port",
-            "0",
-            "--no-warm-up",
-            "--log-level",
-            "info",
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        env=env,
-    )
-    deadline = time.monotonic() + 60
-    assert proc.stdout is not None
-    for line in proc.stdout:
-        m = re.search(r"Uvicorn running on (http://[\d.]+:\d+)", line)
-        if m:
-            url = m.group(1)
-            # keep draining the pipe so the server never blocks on a full one
-            threading.Thread(target=proc.stdout.read, daemon=True).start()
-            return proc, url
-        if time.monotonic() > deadline:
-            break
-    proc.kill()
-    raise AssertionError("server did not start")
+    return start_server(site, db, timeout_s=60, **extra_env)
 
 
 def records() -> list[dict]:

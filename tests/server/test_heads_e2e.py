@@ -3,56 +3,21 @@
 from __future__ import annotations
 
 import os
-import re
 import signal
 import subprocess
 import sys
-import threading
 import time
 
 import httpx2 as httpx
 import pytest
 from heads_helpers import active_site
-from server_helpers import AUTH, TOKEN
+from server_helpers import AUTH, TOKEN, start_server
 
 pytestmark = pytest.mark.timeout(180)
 
 
 def start(site, db):
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "demtrack.cli",
-            "serve",
-            "--site",
-            str(site),
-            "--db",
-            str(db),
-            "--port",
-            "0",
-            "--no-warm-up",
-            "--log-level",
-            "info",
-            "--heads",
-            "sim",
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        env={**os.environ, "DEMTRACK_TOKEN": TOKEN},
-    )
-    assert proc.stdout is not None
-    deadline = time.monotonic() + 90
-    for line in proc.stdout:
-        m = re.search(r"Uvicorn running on (http://[\d.]+:\d+)", line)
-        if m:
-            threading.Thread(target=proc.stdout.read, daemon=True).start()
-            return proc, m.group(1)
-        if time.monotonic() > deadline:
-            break
-    proc.kill()
-    raise AssertionError("server did not start")
+    return start_server(site, db, "--heads", "sim")
 
 
 def head_until(c, pred, timeout_s=30.0):
