@@ -34,8 +34,10 @@ Poses of the moment
     (the lens from the sensor's zoom table, else the ideal zoom), and on a moving
     platform position and attitude. A detection with no sample close enough, or whose
     zoom lies outside the sensor's calibration table, is counted ``no_pose`` and gives no
-    fix: never a fix at a stale pose. Rays are made per zoom in the camera frame, each
-    turned by its own rotation, and cast in one batch with the fixed sensors' rays
+    fix: never a fix at a stale pose. Rays are made in the camera frame in one
+    undistortion per sensor (per-pixel focal lengths for the ideal zoom, a whole lens per
+    detection from a zoom table: ``ZoomTable.pixel_lenses``), each turned by its own
+    rotation, and cast in one batch with the fixed sensors' rays
     (:mod:`~demtrack.core.geolocation.posed_rays`). Other sensors are geolocated at
     their stored pan and tilt, exactly as before.
 
