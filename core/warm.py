@@ -21,6 +21,7 @@ import numpy as np
 
 from .camera.lens import undistort_normalized_nb
 from .camera.pinhole import Camera, Intrinsics
+from .geolocation._posed_kernels import undistort_each
 from .raycast import _ray_kernels
 from .raycast.cast import RayCaster
 from .raycast.light import use_light_kernels
@@ -171,8 +172,10 @@ def _warm_angular(caster: RayCaster) -> None:
 
 # ------------------------------------------------------------- lens, surface, viewshed
 def warm_lens() -> None:
-    """Compile the undistortion kernel (``Intrinsics.undistort`` of a distorted lens)."""
+    """Compile the undistortion kernels (a distorted lens; a lens per pixel, zoom tables)."""
     undistort_normalized_nb(np.array([0.1]), np.array([0.1]), -0.04, 0.0, 0.0, 0.0, 0.0)
+    undistort_each(np.array([0.1]), np.array([0.1]), np.array([[-0.04, 0, 0, 0, 0, 0.0]]),
+                   np.array([np.inf]))  # fmt: skip
 
 
 def warm_surface() -> None:

@@ -25,6 +25,18 @@ With a table (:class:`ZoomTable`, stored in ``site.json`` as ``"zoom_table"``)
 
     An hfov outside the table's range raises :class:`~demtrack.core.errors.PoseError`:
     a lens is not extrapolated.
+
+Many zooms at once (:meth:`ZoomTable.pixel_lenses`)
+    A head that zooms continuously reports a new hfov with every frame; building (and
+    checking) an :class:`Intrinsics` per hfov costs about a millisecond with distortion.
+    :meth:`ZoomTable.pixel_lenses` evaluates the same interpolation for an array of hfovs
+    in one pass (:class:`PixelLenses`: per-pixel fx, fy, cx, cy, coefficients and radial
+    fold radius), for one vectorised undistortion
+    (:mod:`~demtrack.core.geolocation.posed_rays`). Its values equal
+    :meth:`ZoomTable.intrinsics_at`'s to round-off (a few ulps). Of the lens checks it
+    keeps the radial one (the model must not fold inside the image's corner radius, the
+    same test as :class:`Intrinsics`); the grid check for tangential folds becomes a
+    per-pixel one (the pixel's own undistortion must converge with a positive Jacobian).
 """
 
 from __future__ import annotations
@@ -36,10 +48,20 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
+import numpy as np
+
 from ..errors import PoseError
+from .lens import _R_FOLD_MAX
 from .pinhole import Intrinsics
 
-__all__ = ["ZoomEntry", "ZoomTable", "ideal_focal_px", "intrinsics_for_hfov"]
+__all__ = [
+    "PixelLenses",
+    "ZoomEntry",
+    "ZoomTable",
+    "fold_radii",
+    "ideal_focal_px",
+    "intrinsics_for_hfov",
+]
 
 _ENTRY_KEYS = ("hfov_deg", "fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4")
 _LINEAR = ("cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4")
@@ -183,6 +205,65 @@ class ZoomTable:
             values["k1"], values["k2"], values["p1"], values["p2"], values["k3"], values["k4"],
         )  # fmt: skip
 
+    def pixel_lenses(self, hfov_deg: np.ndarray, base: Intrinsics) -> PixelLenses:
+        """The lenses at many zooms at once (module notes), on ``base``'s image size.
+
+        Parameters
+        ----------
+        hfov_deg : ndarray, shape (k,)
+            Horizontal fields of view (degrees).
+        base : Intrinsics
+            The calibrated lens (its image size).
+
+        Returns
+        -------
+        PixelLenses
+            ``valid`` is False where the hfov is not finite, lies outside the table, or
+            the lens there folds inside the image (its other arrays are then NaN).
+        """
+        h = np.asarray(hfov_deg, dtype=np.float64).reshape(-1)
+        table = np.array([[getattr(e, k) for k in _ENTRY_KEYS] for e in self.entries])
+        lo, hi = self.hfov_range_deg
+        inside = np.isfinite(h) & (h >= lo) & (h <= hi) & (h > 0.0) & (h < 180.0)
+        hs = table[:, 0]
+        hh = np.where(inside, h, lo)
+        if len(hs) == 1:
+            vals = np.repeat(table[:1, 1:], len(h), axis=0)
+        else:
+            k = np.clip(np.searchsorted(hs, hh, side="left"), 1, len(hs) - 1)
+            e0, e1 = table[k - 1], table[k]
+            a = ((hh - e0[:, 0]) / (e1[:, 0] - e0[:, 0]))[:, None]
+            vals = e0[:, 1:] + a * (e1[:, 1:] - e0[:, 1:])
+            w = base.width
+
+            def ideal(x: np.ndarray) -> np.ndarray:
+                return 0.5 * w / np.tan(np.radians(x) / 2.0)
+
+            f0, f1, f = ideal(e0[:, 0]), ideal(e1[:, 0]), ideal(hh)
+            for j in (0, 1):  # fx, fy: tan-consistent
+                r0, r1 = e0[:, 1 + j] / f0, e1[:, 1 + j] / f1
+                vals[:, j] = f * (r0 + a[:, 0] * (r1 - r0))
+            exact = hs[k] == hh  # an entry's own hfov: the entry itself
+            vals[exact] = e1[exact, 1:]
+        fx, fy, cx, cy = vals[:, 0], vals[:, 1], vals[:, 2], vals[:, 3]
+        coeffs = vals[:, 4:]
+        k1, k2, _, _, k3, k4 = coeffs.T
+        fold = fold_radii(k1, k2, k3, k4)
+        # The radial check of Intrinsics: no fold inside the image's corner radius.
+        uc = np.array([-0.5, base.width - 0.5])
+        vc = np.array([-0.5, base.height - 0.5])
+        du = np.max(np.abs(uc[None] - cx[:, None]), axis=1) / fx
+        dv = np.max(np.abs(vc[None] - cy[:, None]), axis=1) / fy
+        s = fold * fold
+        with np.errstate(invalid="ignore", over="ignore"):
+            rho = fold * (1.0 + s * (k1 + s * (k2 + s * (k3 + s * k4))))
+        flat = ~np.isfinite(fold)
+        valid = inside & (flat | (rho > np.hypot(du, dv)))
+        out = np.where(valid[:, None], np.column_stack([vals, fold]), np.nan)
+        return PixelLenses(
+            out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4:10], out[:, 10], valid
+        )
+
     def to_list(self) -> list[dict[str, float]]:
         """JSON-ready rows, sorted by hfov (what ``site.json`` stores as ``zoom_table``)."""
         return [e.to_dict() for e in self.entries]
@@ -249,3 +330,64 @@ def _table_lens(zoom: ZoomTable, hfov_deg: float, base: Intrinsics) -> Intrinsic
     distortion); a head holds its zoom for many frames, so the same few come back.
     """
     return zoom.intrinsics_at(hfov_deg, base)
+
+
+@dataclass(frozen=True, eq=False)
+class PixelLenses:
+    """One lens per pixel (:meth:`ZoomTable.pixel_lenses`); arrays of shape (k,).
+
+    Parameters
+    ----------
+    fx, fy, cx, cy : ndarray
+        Focal lengths and principal points (px).
+    coeffs : ndarray, shape (k, 6)
+        ``(k1, k2, p1, p2, k3, k4)`` per pixel.
+    fold_radius : ndarray
+        Undistorted normalised radius of the radial fold (``inf``: none).
+    valid : ndarray of bool
+        Where a lens exists (inside the table, no fold inside the image).
+    """
+
+    fx: np.ndarray
+    fy: np.ndarray
+    cx: np.ndarray
+    cy: np.ndarray
+    coeffs: np.ndarray
+    fold_radius: np.ndarray
+    valid: np.ndarray
+
+    def take(self, rows: np.ndarray) -> PixelLenses:
+        """The lenses of ``rows`` (an index or mask array)."""
+        return PixelLenses(
+            *(getattr(self, f.name)[rows] for f in fields(self))  # type: ignore[arg-type]
+        )
+
+
+def fold_radii(k1: np.ndarray, k2: np.ndarray, k3: np.ndarray, k4: np.ndarray) -> np.ndarray:
+    """:func:`~demtrack.core.camera.lens.radial_fold_radius` for arrays of coefficients.
+
+    The same trimming of negligible leading terms and the same companion-matrix roots
+    (what ``np.roots`` does), batched by polynomial degree.
+    """
+    c = np.column_stack([9.0 * k4, 7.0 * k3, 5.0 * k2, 3.0 * k1, np.ones(len(k1))])
+    deg = np.zeros(len(c), dtype=np.int64)
+    for j in range(4):  # the degree: the first leading term that is not negligible
+        d = 4 - j
+        keep = (deg == 0) & ~(np.abs(c[:, j]) * _R_FOLD_MAX ** (2 * d) < 1e-12)
+        deg[keep] = d
+    out = np.full(len(c), np.inf)
+    for d in range(1, 5):
+        rows = np.flatnonzero(deg == d)
+        if not len(rows):
+            continue
+        p = c[rows, 4 - d :]
+        comp = np.zeros((len(rows), d, d))
+        comp[:, 0, :] = -p[:, 1:] / p[:, :1]
+        if d > 1:
+            comp[:, np.arange(1, d), np.arange(d - 1)] = 1.0
+        roots = np.linalg.eigvals(comp)
+        tol = 1e-7 * np.maximum(1.0, np.abs(roots))
+        real = (np.abs(roots.imag) <= tol) & (roots.real > 0.0)
+        s = np.where(real, roots.real, np.inf).min(axis=1)
+        out[rows] = np.sqrt(s)
+    return out

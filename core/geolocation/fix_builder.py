@@ -34,8 +34,10 @@ Poses of the moment
     (the lens from the sensor's zoom table, else the ideal zoom), and on a moving
     platform position and attitude. A detection with no sample close enough, or whose
     zoom lies outside the sensor's calibration table, is counted ``no_pose`` and gives no
-    fix: never a fix at a stale pose. Rays are made per zoom in the camera frame, each
-    turned by its own rotation, and cast in one batch with the fixed sensors' rays
+    fix: never a fix at a stale pose. Rays are made in the camera frame in one
+    undistortion per sensor (per-pixel focal lengths for the ideal zoom, a whole lens per
+    detection from a zoom table: ``ZoomTable.pixel_lenses``), each turned by its own
+    rotation, and cast in one batch with the fixed sensors' rays
     (:mod:`~demtrack.core.geolocation.posed_rays`). Other sensors are geolocated at
     their stored pan and tilt, exactly as before.
 
@@ -53,8 +55,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..camera.zoom_lens import intrinsics_for_hfov
-from ..errors import CameraError, TrackingError
+from ..errors import TrackingError
 from ..tracking.types import Detection, Fix
 from .posed_rays import PosedView, posed_view_rays
 
@@ -313,23 +314,22 @@ def _posed_views(
         fx = 0.5 * base.width / np.tan(np.radians(hfov) / 2.0)
         view = PosedView(base, u, v, rot, pos, fx, fx * (base.fy / base.fx))
         return [(view, [idx[k] for k in sel.tolist()])]
-    # With a calibration table, one lens per distinct zoom (NaN: the calibrated lens).
-    key = np.where(np.isnan(hfov), -1.0, hfov)
-    zooms, group = np.unique(key, return_inverse=True)
     out = []
-    for g, zoom in enumerate(zooms.tolist()):
-        rows = np.flatnonzero(group == g)
-        try:
-            intr = (
-                head.intrinsics
-                if zoom < 0.0
-                else intrinsics_for_hfov(head.intrinsics, zoom, sensor.zoom)
-            )
-        except CameraError:  # a zoom off the lens's table (or a lens with no inverse there)
-            counts["no_pose"] += len(rows)
-            continue
-        view = PosedView(intr, u[rows], v[rows], rot[rows], pos[rows])
-        out.append((view, [idx[k] for k in sel[rows].tolist()]))
+    unzoomed = np.flatnonzero(np.isnan(hfov))  # no zoom reported: the calibrated lens
+    if len(unzoomed):
+        view = PosedView(head.intrinsics, u[unzoomed], v[unzoomed], rot[unzoomed], pos[unzoomed])
+        out.append((view, [idx[k] for k in sel[unzoomed].tolist()]))
+    zoomed = np.flatnonzero(~np.isnan(hfov))
+    if len(zoomed) and sensor.zoom is not None:
+        # With a calibration table, a lens per detection in one view (one undistortion
+        # with per-pixel coefficients, not an Intrinsics built and checked per zoom).
+        lenses = sensor.zoom.pixel_lenses(hfov[zoomed], head.intrinsics)
+        counts["no_pose"] += int(np.count_nonzero(~lenses.valid))  # off the table
+        rows = zoomed[lenses.valid]
+        if len(rows):
+            lens = lenses.take(lenses.valid)
+            view = PosedView(head.intrinsics, u[rows], v[rows], rot[rows], pos[rows], lenses=lens)
+            out.append((view, [idx[k] for k in sel[rows].tolist()]))
     return out
 
 

@@ -38,6 +38,7 @@ from demtrack.core.camera.pantilt import PanTiltHead
 from demtrack.core.camera.pinhole import Camera
 from demtrack.core.camera.pointing import point_head_at
 from demtrack.core.camera.pose_series import PoseSample, camera_at
+from demtrack.core.camera.zoom_control import ZoomBand, zoom_to_band
 from demtrack.core.camera.zoom_lens import ZoomTable, intrinsics_for_hfov
 from demtrack.core.geolocation.fix_builder import default_foot_offsets
 from demtrack.core.raycast.cast import RayCaster
@@ -325,9 +326,12 @@ class Follower:
         angle = math.degrees(2 * math.atan2(2.25, max(r, 1.0)))
         return self._clip_hfov(info, angle / share)
 
-    def _clip_hfov(self, info: HeadInfo, hfov: float) -> float:
+    def _range(self, info: HeadInfo) -> tuple[float, float]:
         lo = max(info.limits.hfov_min_deg, self.params.min_hfov_deg)
-        hi = min(info.limits.hfov_max_deg, info.home_hfov_deg)
+        return lo, min(info.limits.hfov_max_deg, info.home_hfov_deg)
+
+    def _clip_hfov(self, info: HeadInfo, hfov: float) -> float:
+        lo, hi = self._range(info)
         return float(min(max(hfov, lo), hi))
 
     def _aim(self, info: HeadInfo, p_enu: np.ndarray) -> tuple[float, float]:
@@ -363,8 +367,8 @@ class Follower:
         lo, hi = pr.size_band
         if t_s - self._seen_t.get(owner, -math.inf) > 1.0:
             hfov = self._clip_hfov(info, hfov + 5.0)  # lost: widen to find it again
-        elif share is not None and not lo <= share <= hi:
-            hfov = self._clip_hfov(info, hfov * share / pr.size_goal)
+        else:  # the band rule, shared with the server's followers
+            hfov = zoom_to_band(hfov, share, ZoomBand(lo, hi, pr.size_goal), self._range(info))
         out[owner] = HeadCommand(pan, tilt, hfov)
         nxt = plan.next_sensor
         if nxt is not None and nxt != owner and plan.acquire_enu is not None:

@@ -8,7 +8,10 @@ poses to the pose feed (``state.poses.accept``), and drives the heads by their m
 ``look``     hold a ground point: aimed once (the head does not move, the point neither).
 ``follow``   aim at a track's predicted position each tick: the pipeline's newest
              estimate, extrapolated by the lead (the reorder lag, one tick, and the
-             measured status latency), centred on the target's middle.
+             measured status latency), centred on the target's middle; a head whose
+             lens has a zoom table also zooms so the target spans a band of the image
+             width (:func:`~demtrack.core.camera.zoom_control.zoom_to_band`, the
+             target's width from its range), within the head's and the table's range.
 ``handoff``  pre-positioned for a track another head is about to lose: slewed ahead of
              time, it starts following when the target is predicted to enter.
 
@@ -36,6 +39,8 @@ from typing import Any
 import numpy as np
 
 from demtrack.core.camera.head_motion import SlewLimits
+from demtrack.core.camera.zoom_control import ZoomBand, image_share, zoom_to_band
+from demtrack.core.camera.zoom_lens import ideal_focal_px, intrinsics_for_hfov
 from demtrack.core.errors import DemtrackError, NotFoundError
 from demtrack.core.site.folder import Sensor, Site
 
@@ -55,6 +60,10 @@ PoseFeed = Callable[[str, Sequence[HeadStatus]], None]
 DEADBAND_DEG = 0.02
 #: Target height (m) a follow aims at the middle of.
 TARGET_HEIGHT_M = 1.5
+#: Target width (m) a follow's zoom keeps in the band: a car's length, as the scenarios'.
+TARGET_WIDTH_M = 4.5
+#: A zoom goal is re-sent only when it moved more than this (degrees).
+ZOOM_DEADBAND_DEG = 0.05
 
 
 class HeadNotActiveError(DemtrackError, ValueError):
@@ -85,6 +94,7 @@ class HeadUnit:
     error: str | None = None
     latency_s: float = 0.0
     last_aim: tuple[float, float] | None = None
+    zoom_goal_deg: float | None = None
     unfed: list[HeadStatus] = field(default_factory=list)
 
     def info(self) -> dict[str, Any]:
@@ -126,6 +136,9 @@ class HeadController:
         The polled poses go to the feed in batches this often (s): one durable pose
         batch per head every half second instead of one per poll. Detections wait for
         their poses in the pipeline, so batching delays them, never loses them.
+    zoom_band : ZoomBand, optional
+        The target's share of the image width a following head keeps (default 5-14 %,
+        aiming at 8 %); None: followers hold their zoom.
     """
 
     def __init__(
@@ -141,6 +154,7 @@ class HeadController:
         clock: Callable[[], float] = time.time,
         handoff_horizon_s: float = 20.0,
         feed_every_s: float = 0.5,
+        zoom_band: ZoomBand | None = ZoomBand(),  # noqa: B008 - frozen, shared safely
     ) -> None:
         self.site = site
         self.units = {u.sensor_id: u for u in units}
@@ -155,6 +169,7 @@ class HeadController:
         self.n_ticks = 0
         self.feed_every_s = float(feed_every_s)
         self._fed_at = -np.inf
+        self.zoom_band = zoom_band
 
     # ------------------------------------------------------------ lifecycle
     def start(self) -> HeadController:
@@ -325,23 +340,60 @@ class HeadController:
         lead = self.lead_s + self.period_s + unit.latency_s
         p = motion.at(motion.t_s + lead) + np.array([0.0, 0.0, TARGET_HEIGHT_M / 2])
         pan, tilt = aim_pan_tilt(self.site.sensor(unit.sensor_id), p, self._hfov(unit))
+        goal = self._zoom_goal(unit, p) if unit.mode == "follow" else None
+        zoom_moved = goal is not None and (
+            unit.zoom_goal_deg is None or abs(goal - unit.zoom_goal_deg) > ZOOM_DEADBAND_DEG
+        )
         if (
-            unit.last_aim is not None
+            not zoom_moved
+            and unit.last_aim is not None
             and max(
                 abs((pan - unit.last_aim[0] + 180.0) % 360.0 - 180.0), abs(tilt - unit.last_aim[1])
             )
             < DEADBAND_DEG
         ):
             return
+        if zoom_moved:
+            unit.zoom_goal_deg = goal
         try:
-            unit.adapter.absolute_move(pan, tilt, None)
+            unit.adapter.absolute_move(pan, tilt, unit.zoom_goal_deg)
             unit.last_aim = (pan, tilt)
         except HeadAdapterError as exc:
             unit.error = str(exc)
 
+    def _zoom_goal(self, unit: HeadUnit, p_enu: np.ndarray) -> float | None:
+        """The field of view a follower should zoom to (None: hold; no table or no band).
+
+        The band rule on the share the target's :data:`TARGET_WIDTH_M` spans at its range
+        through the lens at the head's present zoom; the goal stays within the head's
+        limits and the lens's zoom table.
+        """
+        sensor = self.site.sensor(unit.sensor_id)
+        zoom = getattr(sensor, "zoom", None)
+        if self.zoom_band is None or zoom is None or unit.status is None:
+            return None
+        hfov = float(unit.status.hfov_deg)
+        t_lo, t_hi = zoom.hfov_range_deg
+        lo, hi = max(unit.limits.hfov_min_deg, t_lo), min(unit.limits.hfov_max_deg, t_hi)
+        if lo > hi:
+            return None  # the head cannot reach any zoom the lens is calibrated for
+        base = sensor.head.intrinsics
+        # Off the table (a head resting wider than the calibration): the ideal zoom.
+        inside = t_lo <= hfov <= t_hi
+        fx = (
+            intrinsics_for_hfov(base, hfov, zoom).fx if inside else ideal_focal_px(base.width, hfov)
+        )
+        range_m = float(np.linalg.norm(np.asarray(p_enu) - sensor.head.position_enu))
+        share = image_share(TARGET_WIDTH_M, range_m, fx, base.width)
+        goal = zoom_to_band(hfov, share, self.zoom_band, (lo, hi))
+        if not inside:  # whatever the band says, onto the calibrated range
+            goal = min(max(goal, lo), hi)
+        return goal if goal != hfov else unit.zoom_goal_deg
+
     # -------------------------------------------------------------- journal
     def _set(self, unit: HeadUnit, mode: str, target: dict[str, Any]) -> None:
         unit.mode, unit.target, unit.last_aim = mode, dict(target), None
+        unit.zoom_goal_deg = None
         self.journal.append(
             {"t_s": self.clock(), "sensor_id": unit.sensor_id, "mode": mode, **target}
         )
