@@ -50,7 +50,7 @@ def test_no_true_foot_pixel_falls_in_a_mask(site, masks, scenario):
         mask = masks[d.sensor]
         u = int(np.clip(round((d.bbox[0] + d.bbox[2]) / 2), 0, mask.shape[1] - 1))
         v = int(np.clip(round(d.bbox[3]), 0, mask.shape[0] - 1))
-        assert not mask[v, u], (d.sensor, d.t, d.bbox)
+        assert not mask[v, u], (d.sensor, d.t_s, d.bbox)
         n += 1
     assert n > 100
 
