@@ -22,6 +22,11 @@ real-time video", and the hybrid of the VSAM final report (Collins et al. 2000, 
   the pixel was moving, time constant ``restless_s``) marks swaying tree crowns and the
   like; a component whose moving pixels move more often than ``restless`` is not an
   object. A target crosses a pixel once, so its rate stays low.
+- **Ghosts of departed objects**: where a region is learnt into the background (a
+  stopped object after ``hold_s``, a long-still pixel), the background it replaced is
+  kept; a foreground pixel that matches that older background again is where the object
+  stood and has gone: it is background at once (the mean takes the image, the old value
+  is dropped), before components are formed, so no box stays on the empty place.
 - Components below ``min_area_px`` and pixels under the ignore mask are dropped.
 
 The per-pixel work is OpenCV primitives (``cv2.absdiff``, ``cv2.compare``,
@@ -165,6 +170,10 @@ class VsamDetector:
         self._fps = float(fps)
         self._activity_rate = min(1.0, 1.0 / max(restless_s * fps, 1.0))
         self._activity = np.zeros(self.work_size[::-1], np.float32)  # 255 x motion rate
+        # the background each absorbed pixel had before it was absorbed (see _absorb)
+        self._mu_old = np.zeros(self.work_size[::-1], np.float32)
+        self._absorbed = np.zeros(self.work_size[::-1], np.uint8)  # 255 where mu_old holds
+        self._n_absorbed = 0
         self.n_frames = 0
 
     def _prepare(self, image: np.ndarray) -> np.ndarray:
@@ -206,6 +215,8 @@ class VsamDetector:
         thr, thr8 = self._thresholds()
         diff_bg = cv2.absdiff(img, mu)
         fg = cv2.compare(diff_bg, thr, cv2.CMP_GT)
+        if self._n_absorbed:
+            self._restore_departed(img, thr, fg, diff_bg)
         if len(self._prev) == 2:  # three-frame differencing on the uint8 frames
             m1 = cv2.compare(cv2.absdiff(g8, self._prev[0]), thr8, cv2.CMP_GT)
             m2 = cv2.compare(cv2.absdiff(g8, self._prev[1]), thr8, cv2.CMP_GT)
@@ -240,10 +251,50 @@ class VsamDetector:
         self._last_motion = state["stamps"]
         for c in state["rejected"]:  # ghosts and long-still regions: learn them now
             x, y, w, h = c.rect
-            sel = c.roi.astype(bool)
-            mu[y : y + h, x : x + w][sel] = img[y : y + h, x : x + w][sel]
-            self._still[y : y + h, x : x + w][sel] = 0
+            sel = np.zeros(mu.shape, bool)
+            sel[y : y + h, x : x + w] = c.roi.astype(bool)
+            self._absorb(sel, img, keep_old=id(c) not in state["restless_ids"])
+            self._still[sel] = 0
         return blobs
+
+    def _absorb(self, sel: np.ndarray, img: np.ndarray, keep_old: bool = True) -> None:
+        """Learn the pixels ``sel`` (bool, work size) into the background at once.
+
+        With ``keep_old`` the background they had is kept (where none is kept yet), so
+        that :meth:`_restore_departed` knows the place again once the object leaves.
+        """
+        mu = self._mu
+        if mu is None:
+            return
+        if keep_old:
+            new = sel & (self._absorbed == 0)
+            if new.any():
+                self._mu_old[new] = mu[new]
+                self._absorbed[new] = 255
+                self._n_absorbed += int(new.sum())
+        mu[sel] = img[sel]
+
+    def _restore_departed(
+        self, img: np.ndarray, thr: np.ndarray, fg: np.ndarray, diff_bg: np.ndarray
+    ) -> None:
+        """Foreground pixels that match their pre-absorption background: background again.
+
+        Updates ``fg`` (to 0) and ``diff_bg`` there, the mean (to the image) and drops the
+        old background of those pixels.
+        """
+        mu = self._mu
+        if mu is None:
+            return
+        same = cv2.compare(cv2.absdiff(img, self._mu_old), thr, cv2.CMP_LE)
+        back = cv2.bitwise_and(cv2.bitwise_and(same, self._absorbed), fg)
+        if not cv2.countNonZero(back):
+            return
+        sel = back.astype(bool)
+        mu[sel] = img[sel]
+        diff_bg[sel] = 0.0
+        fg[sel] = 0
+        self._absorbed[sel] = 0
+        self._n_absorbed = max(0, self._n_absorbed - int(sel.sum()))
 
     def _validator(self, moving: np.ndarray, state: dict):
         """``keep`` for :func:`blobs_from_mask` (the hybrid rule of the module docstring).
@@ -278,10 +329,12 @@ class VsamDetector:
                 if mv and iou(box, b) > 0.0
             }
             out, stamps, rejected = [], [], []
+            state["restless_ids"] = set()
             for c, box, mv, rl in zip(comps, boxes, is_moving, restless, strict=True):
                 if rl:  # restless background: no object, learnt into the background
                     out.append(False)
                     rejected.append(c)
+                    state["restless_ids"].add(id(c))
                     continue
                 if mv:
                     out.append(True)
@@ -333,5 +386,5 @@ class VsamDetector:
         if self.n_frames % self._check_every == 0:
             absorbed = self._still >= self.absorb_frames
             if absorbed.any():
-                mu[absorbed] = img[absorbed]
+                self._absorb(absorbed, img)
                 self._still[absorbed] = 0

@@ -43,6 +43,7 @@ from demtrack.core.terrain.dem import Dem
 
 from .cameras import TELEMETRY_LATENCY_S, sighting_heads, slew_limits_of
 from .kernel_warmup import load_numba_target
+from .masks import MASK_RANGE_M, crown_mask, write_mask
 from .ortho import ortho_grid, paint_orthophoto
 from .scan import coarse_dem, simulate_laser_scan
 from .world import ANCHOR, EXTENT_M, make_world
@@ -150,14 +151,17 @@ def _build(
             slew_limits=slew_limits_of(spec),
         )
         Image.fromarray(render_view(sensor.camera, dem, rgb, grid)).save(image_path)
-        return spec, head, cal, sensor
+        # the video's camera (true mount yaw): its near swaying crowns, ignored by watch
+        mask = crown_mask(head.camera_at(pan, tilt), dem, world)
+        write_mask(out / "masks" / f"{spec.id}.png", mask)
+        return spec, head, cal, sensor, float(mask.mean())
 
     sensors, truth = [], {}
     # Two cameras at a time: the light kernels release the GIL. Same pixels as the fast
     # kernels, which take three times as long to compile (a cold start's render).
     with light_kernels(), ThreadPoolExecutor(2) as pool:
         RayCaster.for_dem(dem)  # the pyramid (in numpy), once, before the threads share it
-        for spec, head, cal, sensor in pool.map(view, sighting_heads(world)):
+        for spec, head, cal, sensor, masked in pool.map(view, sighting_heads(world)):
             sensors.append(sensor)
             truth[spec.id] = {
                 "true_mount_yaw_deg": spec.true_mount_yaw_deg,
@@ -167,7 +171,8 @@ def _build(
             }
             step(
                 f"{spec.id} ({spec.name}): yaw {cal.yaw_deg:.3f} deg (true"
-                f" {spec.true_mount_yaw_deg}), rms {cal.rms_deg:.3f} deg, image rendered"
+                f" {spec.true_mount_yaw_deg}), rms {cal.rms_deg:.3f} deg, image rendered;"
+                f" mask: {100 * masked:.1f} % (crowns nearer than {MASK_RANGE_M:.0f} m)"
             )
     doc = site_manifest(
         SITE_NAME, frame, sensors, out, geoid=geoid, extra={"generator": {"seed": seed}}

@@ -112,7 +112,7 @@ def test_site_mask_is_found_and_honoured(site, street, tmp_path):
     shutil.copytree(site.root, root)
     mask = np.zeros((720, 1280), np.uint8)
     mask[450:530, 800:] = 255  # the car's lane
-    site_mask_path(root, "cam1").parent.mkdir()
+    site_mask_path(root, "cam1").parent.mkdir(exist_ok=True)  # the sample site ships masks/
     cv2.imwrite(str(site_mask_path(root, "cam1")), mask)
     masked = load_site(root)
     dets = list(detect_video(masked, "cam1", street.path))

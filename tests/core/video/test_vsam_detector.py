@@ -103,6 +103,46 @@ def test_a_stopped_object_is_still_reported_for_hold_s(stop_and_go):
     assert all(seen)
 
 
+@pytest.fixture(scope="module")
+def stop_then_leave(tmp_path_factory):
+    """A car drives in, stands 4 s (longer than hold_s: it is learnt into the background),
+    then leaves downwards, across the image from where it came, as cam2's car does."""
+    path = tmp_path_factory.mktemp("ghost2") / "leave.mp4"
+    arrive = Mover(
+        "vehicle", (-80.0, 60.0), (3.5, 0.0), (80, 50), grey=210, stops=((40, 10**6),),
+        hidden=(LEAVE, 10**6),
+    )  # fmt: skip
+    leave = Mover(
+        "vehicle", (60.0, 60.0), (0.0, 1.0), (80, 50), grey=210, stops=((0, LEAVE - 1),),
+        hidden=(0, LEAVE - 1),
+    )  # fmt: skip
+    return write_video(path, [arrive, leave], n_frames=LEAVE + 80, noise=2.0, drift=0.0)
+
+
+LEAVE = 140  # the frame the car starts to leave its stop place (rows 60..109)
+
+
+def test_no_box_stays_on_the_place_a_stopped_object_left(stop_then_leave):
+    """Once the car has moved off part of its stop place, no box covers that part.
+
+    The place was learnt into the background while the car stood; the empty road that
+    reappears there matches the background from before, so it is background at once.
+    """
+    det = VsamDetector((320, 240), hold_s=2.0)
+    late = []
+    for f in VideoReader(stop_then_leave.path, gray=True):
+        blobs = det.detect(f)
+        if f.index < LEAVE + N_GRACE:
+            continue
+        (car,) = [b for _, b in stop_then_leave.boxes[f.index]]
+        if any(b.bbox[1] < car[1] - 3.0 for b in blobs):  # reaches up into the empty place
+            late.append(f.index)
+    assert late == []
+
+
+N_GRACE = 5  # frames after the car starts to move in which a box may still cover the place
+
+
 def test_the_ignore_mask_is_honoured(traffic):
     mask = np.zeros((240, 320), bool)
     mask[150:, :] = True  # the car's lane
