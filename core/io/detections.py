@@ -485,16 +485,7 @@ def read_detections_jsonl(
     """
     col = _Collector(sensors, max_examples, edge_tolerance_px)
     with _open(source, "r") as fh:
-        first = True
-        for line_no, text in enumerate(fh, start=1):
-            if not text.strip():
-                continue
-            if first:
-                first = False
-                epoch = _epoch_record(text)
-                if epoch is not None:
-                    col.epoch_s = _epoch(epoch, f"detection JSON Lines line {line_no}")
-                    continue
+        for line_no, text in _jsonl_lines(fh, col, "detection"):
             col.offer(line_no, functools.partial(_json_record, text, col))
     return col.result()
 
@@ -661,3 +652,22 @@ def _csv_rows(
             col.skip(line, "malformed", f"{len(row)} fields, header has {n_fields}")
             continue
         yield line, row
+
+
+def _jsonl_lines(fh: Iterable[str], col: Any, what: str) -> Iterator[tuple[int, str]]:
+    """The record lines of a JSON Lines file, each with its line number.
+
+    Blank lines are passed over; a first record ``{"epoch": "..."}`` sets ``col.epoch_s``
+    (``what`` names the file kind in its error) and is not a record.
+    """
+    first = True
+    for line_no, text in enumerate(fh, start=1):
+        if not text.strip():
+            continue
+        if first:
+            first = False
+            epoch = _epoch_record(text)
+            if epoch is not None:
+                col.epoch_s = _epoch(epoch, f"{what} JSON Lines line {line_no}")
+                continue
+        yield line_no, text

@@ -63,8 +63,8 @@ from .detections import (
     Source,
     _csv_rows,
     _epoch,
-    _epoch_record,
     _float,
+    _jsonl_lines,
     _open,
     _Skip,
     _time_of,
@@ -290,16 +290,7 @@ def read_poses_jsonl(
     """Read a pose JSON Lines file; parameters and returns of :func:`read_poses_csv`."""
     col = _PoseCollector(sensors, max_examples)
     with _open(source, "r") as fh:
-        first = True
-        for line_no, text in enumerate(fh, start=1):
-            if not text.strip():
-                continue
-            if first:
-                first = False
-                epoch = _epoch_record(text)
-                if epoch is not None:
-                    col.epoch_s = _epoch(epoch, f"pose JSON Lines line {line_no}")
-                    continue
+        for line_no, text in _jsonl_lines(fh, col, "pose"):
             col.offer(line_no, functools.partial(_json_text, text, col))
     return col.result()
 
