@@ -96,3 +96,28 @@ def fetch_autzen() -> Path:
 def autzen_laz() -> Path:
     """The real Autzen lidar tile (LAZ, Oregon state plane, international feet)."""
     return fetch_autzen()
+
+
+@pytest.fixture(scope="session")
+def postgres_cluster(tmp_path_factory: pytest.TempPathFactory):
+    """A real PostgreSQL 15 server (with PostGIS) for the session, on a loopback port.
+
+    Missing binaries skip locally and fail in CI (``CI`` set), where ``.ci/run`` installs them.
+    """
+    import os
+
+    from tests.postgres_cluster import PostgresCluster, find_pg_bin
+
+    if find_pg_bin() is None:
+        if os.environ.get("CI"):
+            pytest.fail("PostgreSQL is not installed (apt-get install postgresql-15)")
+        pytest.skip("PostgreSQL is not installed (apt-get install postgresql-15)")
+    cluster = PostgresCluster(tmp_path_factory.mktemp("pg")).start()
+    yield cluster
+    cluster.stop()
+
+
+@pytest.fixture
+def postgres_url(postgres_cluster) -> str:
+    """A fresh empty database on the session's PostgreSQL server; its URL."""
+    return postgres_cluster.create_database()
