@@ -12,8 +12,8 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from ..hub import StreamMessage
+from ..store.backend import StoreBackend
 from ..store.codec import payload_dict, published_text
-from ..store.database import Store
 from ..store.derived import FixRow
 from .stream_messages import SensorStatusPayload, StreamPayload
 
@@ -33,7 +33,7 @@ def sensor_status_messages(
 
 
 def store_and_publish(
-    store: Store,
+    store: StoreBackend,
     publish: Publisher,
     fixes: Sequence[FixRow],
     tracks: Sequence[dict[str, Any]],
