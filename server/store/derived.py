@@ -93,10 +93,11 @@ def write_derived_rows(
     for body in activity:
         row = c.execute("SELECT id FROM activity WHERE key = ?", (body["key"],)).fetchone()
         if row is None:
-            body["id"] = dialect.insert_id(
-                c,
-                "INSERT INTO activity (key, kind, t_start, t_end, track_ids, open, body)"
-                " VALUES (?,?,?,?,?,?,'{}')",
+            # The next id, given explicitly (SQLite's own choice): the same on both.
+            ((body["id"],),) = c.execute(
+                "INSERT INTO activity (id, key, kind, t_start, t_end, track_ids, open, body)"
+                " VALUES ((SELECT COALESCE(MAX(id), 0) + 1 FROM activity),?,?,?,?,?,?,'{}')"
+                " RETURNING id",
                 (
                     body["key"],
                     body["kind"],
@@ -105,7 +106,7 @@ def write_derived_rows(
                     dumps_json(body["track_ids"]),
                     int(body["open"]),
                 ),
-            )
+            ).fetchall()
         else:
             body["id"] = int(row[0])
         c.execute(

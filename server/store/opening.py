@@ -45,7 +45,7 @@ def _postgres_error(url: str, exc: BaseException) -> SettingsError:
         password = None
     if password:
         text = text.replace(password, "***")
-    if "postgis" in text.lower() and "extension" in text.lower():
+    if "postgis" in text.lower() and "control file" in text:  # not installed at all
         text = "the PostGIS extension is not installed on the server (postgresql-15-postgis-3)"
     return SettingsError(f"database {shown} cannot be used: {text}")
 

@@ -59,17 +59,24 @@ class StoreReads:
         return int(self._rows("SELECT COALESCE(MAX(seq), 0) FROM events")[0][0])
 
     def last_times(self) -> dict[str, float]:
-        """Latest accepted detection time per sensor (s)."""
+        """Latest accepted detection time per sensor (s), by sensor name.
+
+        Sorted here, not by SQL: the databases' text orders may differ (collations).
+        """
         return {
             s: float(t)
-            for s, t in self._rows("SELECT sensor, MAX(t_s) FROM detections GROUP BY sensor")
+            for s, t in self._rows(
+                "SELECT sensor, MAX(t_s) FROM detections GROUP BY sensor ORDER BY sensor"
+            )
         }
 
     def sensor_counts(self) -> dict[str, int]:
-        """Accepted detections per sensor."""
+        """Accepted detections per sensor, by sensor name."""
         return {
             s: int(n)
-            for s, n in self._rows("SELECT sensor, COUNT(*) FROM detections GROUP BY sensor")
+            for s, n in self._rows(
+                "SELECT sensor, COUNT(*) FROM detections GROUP BY sensor ORDER BY sensor"
+            )
         }
 
     def pose_last_times(self) -> dict[str, float]:
@@ -223,7 +230,7 @@ class StoreReads:
         """The newest event body of ``kind`` per first track id."""
         rows = self._rows(
             "SELECT body FROM activity WHERE id IN (SELECT MAX(id) FROM activity"
-            f" WHERE kind = ? GROUP BY {self.dialect.first_track_id})",  # noqa: S608
+            f" WHERE kind = ? GROUP BY {self.dialect.first_track_id}) ORDER BY id",  # noqa: S608
             (kind,),
         )
         return [loads_json(r[0]) for r in rows]
