@@ -51,6 +51,7 @@ from .api import (
 )
 from .api.deps import READER
 from .api.errors import error_responses, install_error_handlers
+from .cluster.node import start_node
 from .cot.service import start_cot_sender
 from .heads.service import check_heads, start_heads
 from .hub import Hub
@@ -132,6 +133,10 @@ def _fan_out(publishers: list[Publisher]) -> Publisher:
             p(messages)
 
     return publish
+
+
+def _publish_nothing(messages: list[dict[str, Any]]) -> None:
+    """The pipeline's publisher on PostgreSQL: the event log's follower publishes."""
 
 
 def _start_scene(site_: Site, settings: Settings) -> Any:
@@ -267,11 +272,30 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
         subscribers.append(cot.publish)
         log.info("sending CoT to %s", settings.cot_url)
     app.state.cot = cot
+    # On PostgreSQL several processes share the database: the stream is published from
+    # the event log, whoever wrote it (demtrack.server.cluster), never by the pipeline.
+    shared = getattr(store, "kind", "sqlite") == "postgres"
     pipeline = Pipeline(
-        site_, store, settings.tracker_method, _fan_out(subscribers), **pipeline_options(settings)
+        site_,
+        store,
+        settings.tracker_method,
+        _publish_nothing if shared else _fan_out(subscribers),
+        **pipeline_options(settings),
     )
     caster = await run_in_threadpool(site_.dem.ray_caster)
-    counts = await run_in_threadpool(pipeline.start)
+    app.state.cluster = None
+    if shared:
+        app.state.cluster = await run_in_threadpool(
+            start_node,
+            store.url,  # type: ignore[attr-defined]
+            pipeline,
+            site_.name,
+            settings.lease_ttl_s,
+            _fan_out(subscribers),
+        )
+        counts = app.state.cluster.counts
+    else:
+        counts = await run_in_threadpool(pipeline.start)
     hub.last_seq = store.last_seq()
     app.state.schema_version = store.schema_version()  # /api/health reads no database
     log.info("replayed %(replayed)d fixes, processed %(processed)d detections", counts)
@@ -304,6 +328,8 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
             await run_in_threadpool(app.state.replay.stop)
         if app.state.heads is not None:  # it feeds poses into the store
             await run_in_threadpool(app.state.heads.stop)
+        if app.state.cluster is not None:  # hands the lease over before the store closes
+            await run_in_threadpool(app.state.cluster.stop)
         await run_in_threadpool(pipeline.close)  # its pose-message timer writes too
         if scene is not None:
             await run_in_threadpool(scene.stop)

@@ -150,6 +150,10 @@ class Settings(BaseSettings):
     replay_frame_hz : float
         Video replay: most frames per second (wall clock) put in the frame book per camera;
         at higher replay speeds the panel skips frames, the detector does not.
+    lease_ttl_s : float
+        On PostgreSQL with several server processes: how long the tracker's site lease
+        lasts unless renewed (renewed every third of it); a process that dies is
+        replaced as the site's tracker this long after (:mod:`demtrack.server.cluster`).
     """
 
     model_config = SettingsConfigDict(
@@ -208,6 +212,7 @@ class Settings(BaseSettings):
     max_frame_bytes: int = Field(default=2 * 1024 * 1024, gt=0)
     replay_video: bool = False
     replay_frame_hz: float = Field(default=5.0, gt=0, le=30, allow_inf_nan=False)
+    lease_ttl_s: float = Field(default=5.0, ge=0.5, le=600, allow_inf_nan=False)
 
     @field_validator("replay_start_s", mode="before")
     @classmethod

@@ -40,13 +40,18 @@ def store_and_publish(
     events: Sequence[tuple[str, StreamPayload]],
     activity: Sequence[dict[str, Any]],
     stored_hook: Callable[[Sequence[dict[str, Any]]], None] | None = None,
+    *,
+    fence: Callable[[Any], None] | None = None,
 ) -> None:
     """Write a batch's derived rows in one transaction, then publish its messages in order.
 
     ``stored_hook(tracks)``: called once the rows are written, before publishing (the
-    track bodies' points are then clean).
+    track bodies' points are then clean). ``fence``: the cluster lease's check, run in
+    the write's transaction (:meth:`demtrack.server.cluster.lease.SiteLease.fence_check`);
+    a write that it refuses raises and publishes nothing.
     """
-    stored = store.write_derived(fixes, tracks, events, activity=activity)
+    more = {} if fence is None else {"fence": fence}
+    stored = store.write_derived(fixes, tracks, events, activity=activity, **more)
     if stored_hook is not None:
         stored_hook(tracks)
     publish(
