@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from . import (
     activity,
+    archive,
     bench,
     build_dem,
     calibrate,
@@ -13,6 +14,7 @@ from . import (
     gaps,
     geolocate,
     handoff,
+    reprocess,
     sample_site,
     sample_video,
     scenario,
@@ -35,6 +37,8 @@ COMMANDS = (
     scenario,
     sample_video,
     track,
+    reprocess,
+    archive,
     evaluate,
     evaluate_activity,
     evaluate_detections,
