@@ -14,6 +14,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from raycast_checks import assert_identical_hits
 
 from demtrack.core.errors import RaycastError
 from demtrack.core.raycast.cast import RayCaster
@@ -23,8 +24,6 @@ from demtrack.core.raycast.tiled_cast import TiledRayCaster
 from demtrack.core.terrain.dem import Dem
 from demtrack.core.terrain.grid import GridSpec
 from demtrack.core.terrain.tiled_write import synth_cells, write_dem_tiled
-
-from raycast_checks import assert_identical_hits
 
 TILE = 64
 N = 1000
