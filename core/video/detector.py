@@ -27,6 +27,12 @@ real-time video", and the hybrid of the VSAM final report (Collins et al. 2000, 
   kept; a foreground pixel that matches that older background again is where the object
   stood and has gone: it is background at once (the mean takes the image, the old value
   is dropped), before components are formed, so no box stays on the empty place.
+- **Calm background**: three-frame motion counts only where the learnt background is
+  calm (every sigma within 4 px at most ``calm_factor`` times the scene's median sigma,
+  the camera's noise). A crown's texture and outline give its pixels sigmas 3-10 times
+  the noise even where a gust sways it into pixels of low motion rate; a component
+  whose moving pixels all lie there has no evidence of an object and is learnt into
+  the background like a ghost. A target over the grass or a road is over calm pixels.
 - Components below ``min_area_px`` and pixels under the ignore mask are dropped.
 
 The per-pixel work is OpenCV primitives (``cv2.absdiff``, ``cv2.compare``,
@@ -95,6 +101,12 @@ class VsamDetector:
         not an object. 1 turns the test off.
     restless_s : float
         Time constant of that per-pixel motion rate (s).
+    calm_factor : float
+        A pixel's motion is evidence of an object only where the background is calm:
+        its learnt sigma, and every sigma within 4 px of it, at most this many times the
+        scene's median sigma (the camera's noise). Swaying crowns are learnt with large
+        variances (their texture and outline flicker at the edge of the model); motion
+        there is the crown's. 0 turns the test off.
     hold_s : float
         A kept object that stops is still reported this long after its last motion;
         then (and any foreground region never validated by motion, a ghost) it is learnt
@@ -120,6 +132,7 @@ class VsamDetector:
         hold_s: float = 5.0,
         restless: float = 0.12,
         restless_s: float = 10.0,
+        calm_factor: float = 3.0,
         validate: bool = True,
         downscale: int = 1,
     ) -> None:
@@ -159,6 +172,9 @@ class VsamDetector:
         self._var: np.ndarray | None = None
         self._prev: list[np.ndarray] = []  # I_{n-1}, I_{n-2} (uint8)
         self._thr: tuple[np.ndarray, np.ndarray] | None = None
+        self.calm_factor = float(calm_factor)
+        self._calm: np.ndarray | None = None  # 255 where the background is calm
+        self._calm_kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (9, 9))  # 4 px
         self._still = np.zeros(self.work_size[::-1], np.uint16)  # frames fg without motion
         self._one16 = np.ones_like(self._still)
         self._kept: list[tuple[float, float, float, float]] = []
@@ -197,6 +213,12 @@ class VsamDetector:
             np.maximum(thr, np.float32(self.min_diff), out=thr)
             thr8 = np.floor(np.minimum(thr, 255.0)).astype(np.uint8)
             self._thr = (thr, thr8)
+            if self.calm_factor > 0:
+                # sigma <= calm_factor x the scene's median sigma (its noise floor), as a
+                # threshold: k sigma <= k calm_factor median
+                floor = float(np.median(thr[::8, ::8])) / self.k
+                limit = max(self.k * self.calm_factor * floor, self.min_diff)
+                self._calm = cv2.erode(cv2.compare(thr, limit, cv2.CMP_LE), self._calm_kernel)
         if self._thr is None:
             raise VideoError("no background model yet")
         return self._thr
@@ -231,6 +253,8 @@ class VsamDetector:
         # so swaying crowns are known within about a second of the first frame
         rate = max(self._activity_rate, 1.0 / (self.n_frames + self._fps))
         cv2.accumulateWeighted(moving, self._activity, rate)
+        if self._calm is not None:  # motion over a restless background is no evidence
+            moving = cv2.bitwise_and(moving, self._calm)
         self._update(img, diff_bg, fg, moving)
         if self.n_frames < 3:
             return []
