@@ -159,6 +159,7 @@ class VsamDetector:
         self.k = float(threshold_sigma)
         self.min_diff = float(min_diff)
         self.min_area_px = float(min_area_px)
+        self.min_area: float | np.ndarray = self.min_area_px  # or a map, set_min_area_map
         self.validate = bool(validate)
         self.absorb_frames = max(1, int(round(absorb_s * fps)))
         full_mask = prepare_mask(mask, self.size)
@@ -191,6 +192,19 @@ class VsamDetector:
         self._absorbed = np.zeros(self.work_size[::-1], np.uint8)  # 255 where mu_old holds
         self._n_absorbed = 0
         self.n_frames = 0
+
+    def set_min_area_map(self, min_area_px: np.ndarray) -> None:
+        """Make the minimum blob area a function of the foot pixel.
+
+        ``min_area_px`` : ``(h, w)`` full-frame minimum areas (full-frame pixels) by
+        foot pixel, e.g. :func:`~.scale.min_area_map` of the person's size there.
+        """
+        m = np.asarray(min_area_px, dtype=np.float32)
+        if m.shape != self.size[::-1] or not np.isfinite(m).all() or (m < 1).any():
+            raise VideoError(f"min_area_px must be a finite (h, w) = {self.size[::-1]} map >= 1")
+        if self.scale > 1:
+            m = cv2.resize(m, self.work_size, interpolation=cv2.INTER_AREA)
+        self.min_area = np.ascontiguousarray(m)
 
     def _prepare(self, image: np.ndarray) -> np.ndarray:
         g = _gray(image)
@@ -265,12 +279,12 @@ class VsamDetector:
         if self._keep_mask is not None:
             clean = cv2.bitwise_and(clean, self._keep_mask)
         if not self.validate:
-            blobs = blobs_from_mask(clean, min_area_px=self.min_area_px, scale=self.scale)
+            blobs = blobs_from_mask(clean, min_area_px=self.min_area, scale=self.scale)
             self._kept = [b.bbox for b in blobs]
             return blobs
         state: dict = {}
         keep = self._validator(moving, state)
-        blobs = blobs_from_mask(clean, min_area_px=self.min_area_px, scale=self.scale, keep=keep)
+        blobs = blobs_from_mask(clean, min_area_px=self.min_area, scale=self.scale, keep=keep)
         self._kept = [b.bbox for b in blobs]
         self._last_motion = state["stamps"]
         for c in state["rejected"]:  # ghosts and long-still regions: learn them now
