@@ -50,8 +50,7 @@ def store_and_publish(
     the write's transaction (:meth:`demtrack.server.cluster.lease.SiteLease.fence_check`);
     a write that it refuses raises and publishes nothing.
     """
-    more = {} if fence is None else {"fence": fence}
-    stored = store.write_derived(fixes, tracks, events, activity=activity, **more)
+    stored = store.write_derived(fixes, tracks, events, activity=activity, fence=fence)
     if stored_hook is not None:
         stored_hook(tracks)
     publish(
