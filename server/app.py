@@ -61,8 +61,9 @@ from .scenario_source import ScenarioSource
 from .security import RequestGate, install_log_redaction, resolve_token
 from .settings import Settings
 from .state import ConsoleState
-from .store.database import Store
+from .store.backend import StoreBackend
 from .store.markers import list_markers
+from .store.opening import open_store
 from .stream import endpoint as stream
 from .video.frames_http import frame_book
 from .video.service import check_video_source, start_video_replay
@@ -148,7 +149,7 @@ def _start_scene(site_: Site, settings: Settings) -> Any:
 
 def _start_replay(
     site_: Site,
-    store: Store,
+    store: StoreBackend,
     pipeline: Pipeline,
     settings: Settings,
     scenarios: ScenarioSource,
@@ -209,13 +210,19 @@ def check_startup(app: FastAPI) -> None:
     SiteError
         The site folder, a file it names (DEM, roads, images) or the database cannot be
         used; the message names the file and the problem.
+    SettingsError
+        The PostgreSQL database of ``database_url`` cannot be used (its URL is named
+        without the password).
     """
     settings: Settings = app.state.settings
     app.state.preloaded_site = load_site(settings.site)
     check_heads(app.state.preloaded_site, settings)  # a bad head_adapter entry: one line
+    if settings.database_url is not None:  # PostgreSQL: open_store words its own errors
+        open_store(settings).close()
+        return
     path = settings.resolved_db_path
     try:
-        Store(path).close()
+        open_store(path).close()
     except sqlite3.DatabaseError as exc:
         raise SiteError(f"database {path} cannot be used: {exc}") from None
     except RuntimeError as exc:  # a newer schema
@@ -241,7 +248,7 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     site_ = (
         preloaded if preloaded is not None else await run_in_threadpool(load_site, settings.site)
     )
-    store = Store(settings.resolved_db_path)
+    store = open_store(settings)
     hub = Hub(settings.ws_queue_size)
     hub.bind(asyncio.get_running_loop())
     scene = await run_in_threadpool(_start_scene, site_, settings) if settings.scene3d else None

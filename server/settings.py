@@ -30,6 +30,10 @@ class Settings(BaseSettings):
         The site folder (``site.json`` inside).
     db_path : Path or None
         SQLite file; default ``<site>/console.sqlite3`` (next to the site's files).
+    database_url : str or None
+        ``postgresql://user[:password]@host[:port]/database`` (``DEMTRACK_DATABASE_URL``):
+        keep the store on that PostgreSQL + PostGIS server instead of the SQLite file (see
+        docs/postgres.md); unset (the default): SQLite, ``db_path``.
     token : SecretStr or None
         Operator token. When unset, one is generated on first start, stored in
         ``<db_path>.token`` (mode 0600) and reused on later starts.
@@ -158,6 +162,7 @@ class Settings(BaseSettings):
 
     site: Path
     db_path: Path | None = None
+    database_url: str | None = None
     token: SecretStr | None = None
     open_reads: bool = False
     cors_origins: list[str] = Field(default_factory=list)
@@ -238,6 +243,25 @@ class Settings(BaseSettings):
         except ValueError as exc:  # SettingsError is a ValueError: pydantic reports it
             raise ValueError(str(exc)) from None
         return value.strip()
+
+    @field_validator("database_url")
+    @classmethod
+    def _check_database_url(cls, value: str | None) -> str | None:
+        """A ``postgresql://`` URL, or None (blank is None: SQLite)."""
+        if value is None or not value.strip():
+            return None
+        if value.strip().split("://", 1)[0].lower() not in ("postgresql", "postgres"):
+            raise ValueError("database_url must be a postgresql:// URL")
+        return value.strip()
+
+    @property
+    def database_label(self) -> str:
+        """The store as it may be printed: the SQLite file, or the URL without a password."""
+        if self.database_url is None:
+            return str(self.resolved_db_path)
+        from .store.postgres.connection import safe_url
+
+        return safe_url(self.database_url)
 
     @property
     def resolved_db_path(self) -> Path:

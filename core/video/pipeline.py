@@ -34,6 +34,7 @@ from .classify import CLUTTER, BlobClassifier
 from .detector import VsamDetector
 from .opencv_models import KnnDetector, Mog2Detector
 from .reader import Frame, KlvPacket, VideoReader
+from .scale import min_area_map, person_area_map
 
 if TYPE_CHECKING:
     from ..site.folder import Site
@@ -108,6 +109,10 @@ class VideoDetections:
     require_travel : bool
         Report a track only once it has travelled (``BlobTrack.moved``); off by default,
         as an object moving along the line of sight hardly travels in the image.
+    scale_min_area : bool
+        With a metric classifier and the VSAM detector, the detector's minimum blob area
+        becomes 40 % of a person's area at each foot pixel (:mod:`.scale`; at least 4 px,
+        at most the detector's own minimum), so that far walkers a few pixels wide stay.
     """
 
     def __init__(
@@ -119,6 +124,7 @@ class VideoDetections:
         tracker: BlobTracker | None = None,
         *,
         require_travel: bool = False,
+        scale_min_area: bool = True,
     ) -> None:
         self.reader = reader
         self.require_travel = bool(require_travel)
@@ -127,6 +133,12 @@ class VideoDetections:
         self.classifier = classifier or BlobClassifier()
         self.tracker = tracker or BlobTracker()
         self.lag = self.tracker.min_history
+        if scale_min_area and self.classifier.metric and isinstance(detector, VsamDetector):
+            # the minimum blob area follows a person's size at the foot pixel's range
+            cam, geo = self.classifier.camera, self.classifier.geolocator
+            area = person_area_map(cam, geo)
+            if area.shape == detector.size[::-1]:
+                detector.set_min_area_map(min_area_map(area, ceil_px=detector.min_area_px))
 
     def __iter__(self) -> Iterator[Detection]:
         """Every detection, in time order."""

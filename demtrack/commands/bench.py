@@ -1,4 +1,7 @@
-"""``demtrack bench raycast|viewshed|server|pipeline|console-soak|lidar-holdout|video``."""
+"""``demtrack bench raycast|viewshed|server|pipeline|console-soak|lidar-holdout|video|large-dem``.
+
+Each job parses its own options (``demtrack bench NAME --help``).
+"""
 
 from __future__ import annotations
 
@@ -9,6 +12,7 @@ __all__ = ["register"]
 
 def _run(args: argparse.Namespace) -> int:
     from demtrack.bench import (
+        large_dem,
         lidar_holdout,
         pipeline_replay,
         raycast,
@@ -24,6 +28,7 @@ def _run(args: argparse.Namespace) -> int:
         "pipeline": pipeline_replay.main,
         "lidar-holdout": lidar_holdout.main,
         "video": video_detect.main,
+        "large-dem": large_dem.main,
     }
     if args.bench == "console-soak":  # Playwright is imported only for this one
         from demtrack.bench import console_soak
@@ -65,6 +70,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         add_help=False,
     )
     vd.set_defaults(func=_run)
+    ld = bsub.add_parser(
+        "large-dem",
+        help="camera rays over a tiled DEM larger than memory, under a memory budget",
+        add_help=False,
+    )
+    ld.set_defaults(func=_run)
     c = bsub.add_parser(
         "console-soak",
         help="the console in Chromium over a long replay at 10x with about 20 tracks",

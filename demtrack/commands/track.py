@@ -33,7 +33,13 @@ if TYPE_CHECKING:
     from demtrack.core.site.folder import Site
     from demtrack.core.tracking import Track
 
-__all__ = ["DEFAULT_METHOD", "register", "track_detections"]
+__all__ = [
+    "DEFAULT_METHOD",
+    "check_track_suffix",
+    "register",
+    "track_detections",
+    "write_track_file",
+]
 
 UNIX_EPOCH_DT = datetime(1970, 1, 1, tzinfo=UTC)
 SUFFIXES = (".geojson", ".json", ".csv", ".gpx", ".kml", ".kmz", ".gpkg")
@@ -104,18 +110,22 @@ def _with_estimated_latency(
     return replace(site, sensors=sensors)
 
 
-def _run(args: argparse.Namespace) -> int:
-    out = Path(args.output)
+def check_track_suffix(out: Path) -> str:
+    """The track file's lower-case suffix; an unknown one is an :class:`InputFileError`."""
     suffix = out.suffix.lower()
     if suffix not in SUFFIXES:
         raise InputFileError(f"unknown track file type {suffix!r} (use {', '.join(SUFFIXES)})")
-    epoch = _epoch(args.epoch)
+    return suffix
+
+
+def write_track_file(
+    site: Site, tracks: Sequence[Track], out: Path, epoch: datetime | None = None
+) -> None:
+    """Write ``tracks`` in the format of ``out``'s suffix (and a ``.csvt`` beside a CSV)."""
     from demtrack.core.io.track_io import TRACK_CSVT, TimeBase, write_tracks
-    from demtrack.core.site.folder import load_site
     from demtrack.server.track_export import site_heights
 
-    site = load_site(args.site)
-    tracks = track_detections(site, args.detections, args.method, args.poses, args.estimate_latency)
+    suffix = check_track_suffix(out)
     frame = site.frame
 
     def to_geodetic(e: float, n: float, u: float) -> tuple[float, float, float]:
@@ -131,6 +141,17 @@ def _run(args: argparse.Namespace) -> int:
     if fmt == "csv":
         # GDAL's column types for the CSV, beside it (ogr reads x.csvt with x.csv).
         out.with_suffix(".csvt").write_text(TRACK_CSVT, encoding="utf-8")
+
+
+def _run(args: argparse.Namespace) -> int:
+    out = Path(args.output)
+    check_track_suffix(out)
+    epoch = _epoch(args.epoch)
+    from demtrack.core.site.folder import load_site
+
+    site = load_site(args.site)
+    tracks = track_detections(site, args.detections, args.method, args.poses, args.estimate_latency)
+    write_track_file(site, tracks, out, epoch)
     n_gaps = sum(len(t.gaps) for t in tracks)
     print(f"{args.method}: {len(tracks)} track(s), {n_gaps} gap(s) -> {out}")
     return 0

@@ -34,7 +34,7 @@ from demtrack.core.tracking import build_tracker
 from demtrack.core.tracking.types import Detection, Fix, Track
 
 from ..live_events import LiveEventParams, LiveEvents
-from ..store.database import Store
+from ..store.backend import StoreBackend
 from ..store.derived import FixRow
 from ..store.integrity import StoreUnavailableError
 from .events import event_message, ingest_message
@@ -101,7 +101,7 @@ class Pipeline:
     Parameters
     ----------
     site : Site
-    store : Store
+    store : StoreBackend
     method : str
         Tracking method (a key of :data:`demtrack.core.tracking.METHODS`).
     publish : callable
@@ -123,7 +123,7 @@ class Pipeline:
     def __init__(
         self,
         site: Site,
-        store: Store,
+        store: StoreBackend,
         method: str,
         publish: Publisher,
         *,

@@ -12,8 +12,8 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from ..hub import StreamMessage
+from ..store.backend import StoreBackend
 from ..store.codec import payload_dict, published_text
-from ..store.database import Store
 from ..store.derived import FixRow
 from .stream_messages import SensorStatusPayload, StreamPayload
 
@@ -33,7 +33,7 @@ def sensor_status_messages(
 
 
 def store_and_publish(
-    store: Store,
+    store: StoreBackend,
     publish: Publisher,
     fixes: Sequence[FixRow],
     tracks: Sequence[dict[str, Any]],
@@ -50,8 +50,7 @@ def store_and_publish(
     the write's transaction (:meth:`demtrack.server.cluster.lease.SiteLease.fence_check`);
     a write that it refuses raises and publishes nothing.
     """
-    more = {} if fence is None else {"fence": fence}
-    stored = store.write_derived(fixes, tracks, events, activity=activity, **more)
+    stored = store.write_derived(fixes, tracks, events, activity=activity, fence=fence)
     if stored_hook is not None:
         stored_hook(tracks)
     publish(
