@@ -8,9 +8,10 @@ after the last one it published (``store.events_since``) and hands them on in se
 order. So a console on any process sees every message once, in order; the tracker's own
 process publishes nothing itself (its pipeline's publisher is a no-op on PostgreSQL).
 
-A hole in the sequence (``seq`` 7 committed while 6 is still in its transaction) is waited
-for: the messages after it are held back until it appears or ``gap_wait_s`` has passed
-(a number taken by a transaction that rolled back never appears).
+The store numbers events under an advisory lock held to the commit, so numbers become
+visible in order; should a hole appear all the same (events deleted by hand, a future
+numbering), the messages after it are held back until it fills or ``gap_wait_s`` has
+passed, and the hole is logged.
 """
 
 from __future__ import annotations
@@ -21,12 +22,12 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from ..store.postgres.dialect import EVENT_CHANNEL as CHANNEL
+
 __all__ = ["CHANNEL", "EventTail"]
 
 log = logging.getLogger("demtrack.server")
 
-#: The notification channel of the event log (the store notifies it on every append).
-CHANNEL = "demtrack_events"
 _PAGE = 1000
 
 
