@@ -21,6 +21,7 @@ agrees to rounding (well under 1e-9 m), as it says itself.
 
 from __future__ import annotations
 
+import threading
 from typing import Literal
 
 import numpy as np
@@ -34,8 +35,10 @@ from .hits import RayHits
 from .pyramid import pyramid_level_shapes, pyramid_levels_above
 from .tile_cache import CacheStats, TileCache
 
-__all__ = ["FIRST_PASS_HITS", "TiledRayCaster"]
+__all__ = ["DEFAULT_MEMORY_BUDGET", "FIRST_PASS_HITS", "TiledRayCaster"]
 
+#: Budget of decoded blocks (bytes) where a caller names none (a site's geolocator).
+DEFAULT_MEMORY_BUDGET = 1 << 30
 #: Hits kept per ray in the first pass of ``mode="all"``; rays with more are cast again
 #: with room for ``max_hits`` (as the in-memory caster re-walks them).
 FIRST_PASS_HITS = 8
@@ -85,6 +88,8 @@ class TiledRayCaster:
         )
         self.block_max = np.ascontiguousarray(dem.minmax[..., 0], np.float32)
         self._round = 0
+        # One cast at a time: the pool, its table and the round counter are shared.
+        self._lock = threading.Lock()
 
     @classmethod
     def open(cls, path: str, memory_budget: int) -> TiledRayCaster:
@@ -121,6 +126,19 @@ class TiledRayCaster:
         first = mode == "first"
         max_hits = 1 if first else int(max_hits)
         cap = 1 if first else min(FIRST_PASS_HITS, max_hits)
+        with self._lock:
+            return self._cast(o, d, rng, first, max_hits, cap)
+
+    def _cast(
+        self,
+        o: np.ndarray,
+        d: np.ndarray,
+        rng: np.ndarray,
+        first: bool,
+        max_hits: int,
+        cap: int,
+    ) -> RayHits:
+        """:meth:`cast` once the rays are checked."""
         n = len(o)
         buf, counts, status, crossed, truncated = self._walk_all(o, d, rng, first, max_hits, cap)
         offsets = np.zeros(n + 1, np.int64)
