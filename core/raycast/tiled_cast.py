@@ -39,6 +39,7 @@ __all__ = ["DEFAULT_MEMORY_BUDGET", "FIRST_PASS_HITS", "TiledRayCaster"]
 
 #: Budget of decoded blocks (bytes) where a caller names none (a site's geolocator).
 DEFAULT_MEMORY_BUDGET = 1 << 30
+_CAST_LOCK = threading.Lock()
 #: Hits kept per ray in the first pass of ``mode="all"``; rays with more are cast again
 #: with room for ``max_hits`` (as the in-memory caster re-walks them).
 FIRST_PASS_HITS = 8
@@ -88,8 +89,6 @@ class TiledRayCaster:
         )
         self.block_max = np.ascontiguousarray(dem.minmax[..., 0], np.float32)
         self._round = 0
-        # One cast at a time: the pool, its table and the round counter are shared.
-        self._lock = threading.Lock()
 
     @classmethod
     def open(cls, path: str, memory_budget: int) -> TiledRayCaster:
@@ -116,6 +115,20 @@ class TiledRayCaster:
         ``coherent`` is accepted for the same call surface and ignored (the tiled walk
         has no angular index; the answers are the pyramid walk's).
         """
+        # One cast at a time in a process: a caster's pool, table and round counter are
+        # shared, and numba's default thread pool must not be entered from two threads.
+        with _CAST_LOCK:
+            return self._checked_cast(origins, directions, max_range, mode, max_hits, coherent)
+
+    def _checked_cast(
+        self,
+        origins: np.ndarray,
+        directions: np.ndarray,
+        max_range: float | np.ndarray,
+        mode: str,
+        max_hits: int,
+        coherent: bool | None,
+    ) -> RayHits:
         o, d, rng = _validate_rays(origins, directions, max_range)
         if coherent not in (None, True, False):
             raise RaycastError(f"coherent must be None, True or False, got {coherent!r}")
@@ -126,8 +139,7 @@ class TiledRayCaster:
         first = mode == "first"
         max_hits = 1 if first else int(max_hits)
         cap = 1 if first else min(FIRST_PASS_HITS, max_hits)
-        with self._lock:
-            return self._cast(o, d, rng, first, max_hits, cap)
+        return self._cast(o, d, rng, first, max_hits, cap)
 
     def _cast(
         self,
