@@ -43,12 +43,13 @@ def write_derived_rows(
     """
     # id(fix body) -> (the body, kept alive so no other object takes its id; JSON)
     encoded: dict[int, tuple[Any, bytes]] = {}
-    fix_rows = []
+    fix_rows, fix_bodies = [], []
     for i, t, s, k, st, b in fixes:
         raw = encode_json(b)
         encoded[id(b)] = (b, raw)
         fix_rows.append((i, t, s, k, st, raw.decode()))
-    c.executemany(dialect.upsert_fix, fix_rows)
+        fix_bodies.append(b)
+    dialect.write_fixes(c, fix_rows, fix_bodies)
     if replace_tracks:
         history.clear()  # and nothing of this call is recorded: chains break
         keep = set(keep_track_ids)
@@ -83,7 +84,7 @@ def write_derived_rows(
     # Points from the first that changed on: dropped, then written again; then the heads
     # (PostgreSQL's track line is made from the stored points: they go first).
     c.executemany("DELETE FROM track_points WHERE track_id = ? AND k >= ?", cuts)
-    c.executemany("INSERT INTO track_points (track_id, k, point) VALUES (?,?,?)", points)
+    dialect.write_points(c, points)
     dialect.write_track_heads(c, heads, [start for _, start in cuts])
     if cuts and not replace_tracks:
         starts: dict[int, int] = {}

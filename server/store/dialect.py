@@ -26,11 +26,23 @@ class Dialect:
     #: ``store.kind``: which database.
     kind = "sqlite"
 
-    #: A fix row (``detection_id, t_s, sensor, cls, status, body``), replacing one there.
-    upsert_fix = (
-        "INSERT OR REPLACE INTO fixes (detection_id, t_s, sensor, cls, status, body)"
-        " VALUES (?,?,?,?,?,?)"
-    )
+    def write_fixes(
+        self, c: Any, rows: Sequence[tuple[Any, ...]], bodies: Sequence[dict[str, Any]]
+    ) -> None:
+        """Insert fix rows, each replacing the one of its detection.
+
+        ``rows``: ``(detection_id, t_s, sensor, cls, status, body text)``; ``bodies[k]``:
+        row ``k``'s body as a dict.
+        """
+        c.executemany(
+            "INSERT OR REPLACE INTO fixes (detection_id, t_s, sensor, cls, status, body)"
+            " VALUES (?,?,?,?,?,?)",
+            rows,
+        )
+
+    def write_points(self, c: Any, rows: Sequence[tuple[int, int, str]]) -> None:
+        """Insert track points ``(track_id, k, point text)`` (none of them is stored)."""
+        c.executemany("INSERT INTO track_points (track_id, k, point) VALUES (?,?,?)", rows)
 
     #: The first track id of an activity row's ``track_ids`` (a JSON list of ints).
     first_track_id = "json_extract(track_ids, '$[0]')"

@@ -237,3 +237,19 @@ def test_a_database_that_cannot_be_used_is_one_line(
     assert "postgresql://" in err and ("***" in err), err
     if case == "no_postgis":
         assert "postgis" in err.lower(), err
+
+
+def test_a_lost_connection_refuses_one_write_and_the_next_reconnects(pg, postgres_url):
+    from demtrack.server.store.integrity import StoreUnreachableError
+
+    pg.insert_batch([det(0.0)], {"n_records": 1, "accepted": 1}, "a")
+    with psycopg.connect(postgres_url, autocommit=True) as admin:
+        admin.execute(
+            "SELECT pg_terminate_backend(pid) FROM pg_stat_activity"
+            " WHERE application_name LIKE 'demtrack-store%%' AND datname = current_database()"
+        )
+    with pytest.raises(StoreUnreachableError, match="cannot be reached"):
+        pg.insert_batch([det(1.0)], {"n_records": 1, "accepted": 1}, "b")
+    again = pg.insert_batch([det(1.0)], {"n_records": 1, "accepted": 1}, "b")
+    assert not again.duplicate and again.detection_ids == (2,)  # nothing of the refused one
+    assert [i for i, _ in pg.detections()] == [1, 2]  # the reader reconnects too

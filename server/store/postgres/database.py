@@ -27,7 +27,7 @@ from ...track_history import PointCuts
 from ..batches import BatchMaker, StoredBatch, insert_batch_rows
 from ..derived import FixRow, write_derived_rows
 from ..dialect import Dialect
-from ..integrity import StoreFullError
+from ..integrity import StoreFullError, StoreUnreachableError
 from ..reading import StoreReads
 from . import schema
 from .connection import QmarkConnection, connect, safe_url
@@ -99,7 +99,9 @@ class PostgresStore(StoreReads):
 
         ``fn`` gets the ``?``-placeholder connection (:class:`.connection.QmarkConnection`;
         ``.raw`` is psycopg's). A full disk on the server is
-        :class:`~demtrack.server.store.integrity.StoreFullError` (rolled back).
+        :class:`~demtrack.server.store.integrity.StoreFullError` (rolled back), a lost
+        connection :class:`~demtrack.server.store.integrity.StoreUnreachableError` (the
+        API answers 503; the next write opens a new connection).
         """
         with self._wlock:
             self._reconnect_writer()
@@ -115,6 +117,14 @@ class PostgresStore(StoreReads):
                 raise StoreFullError(
                     f"the database {self.safe_url} is full (no space left on the server's"
                     " disk): nothing was stored; retry once space is freed"
+                ) from None
+            except psycopg.OperationalError as exc:  # the server went away mid-write
+                if not (self._w.broken or self._w.closed):
+                    raise
+                raise StoreUnreachableError(
+                    f"the database {self.safe_url} cannot be reached"
+                    f" ({' '.join(str(exc).split())[:200]}): nothing was stored; the next"
+                    " write reconnects"
                 ) from None
 
     def insert_batch(
@@ -189,4 +199,10 @@ class PostgresStore(StoreReads):
     def _rows(self, sql: str, params: Sequence[Any] = ()) -> list[tuple[Any, ...]]:
         with self._rlock:
             self._reconnect_reader()
+            try:
+                return self._rq.execute(sql, params).fetchall()
+            except psycopg.OperationalError:
+                if not self._r.broken:
+                    raise
+            self._reconnect_reader()  # the server dropped the connection: once more
             return self._rq.execute(sql, params).fetchall()

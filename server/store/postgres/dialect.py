@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from ..codec import encode_json
+from ..codec import encode_json, loads_json
 from ..dialect import Dialect
 
 __all__ = ["BATCH_LOCK", "EVENT_CHANNEL", "EVENT_LOCK", "POSTGRES", "PostgresDialect"]
@@ -23,6 +23,29 @@ BATCH_LOCK = 0x64656D_0002
 EVENT_LOCK = 0x64656D_0003
 #: The channel every event-writing transaction notifies (payload: the newest ``seq``).
 EVENT_CHANNEL = "demtrack_events"
+
+# Each column a binary array parameter (no text escaping in Python; floats exact).
+_UPSERT_FIXES = (
+    "INSERT INTO fixes (detection_id, t_s, sensor, cls, status, body, geom)"
+    " SELECT i, t, s, k, st, b, ST_MakePoint(e, n) FROM unnest(%b::bigint[], %b::float8[],"
+    " %b::text[], %b::text[], %b::text[], %b::text[], %b::float8[], %b::float8[])"
+    " AS u(i, t, s, k, st, b, e, n)"
+    " ON CONFLICT (detection_id) DO UPDATE SET t_s = EXCLUDED.t_s, sensor = EXCLUDED.sensor,"
+    " cls = EXCLUDED.cls, status = EXCLUDED.status, body = EXCLUDED.body, geom = EXCLUDED.geom"
+)
+
+
+def _number(v: Any) -> float | None:
+    return float(v) if isinstance(v, int | float) and not isinstance(v, bool) else None
+
+
+def _first_hit(body: dict[str, Any]) -> tuple[float | None, float | None]:
+    """A fix body's first hit ``(e_m, n_m)``, or ``(None, None)`` (no Point)."""
+    hits = body.get("hits") if isinstance(body, dict) else None
+    if not hits or not isinstance(hits[0], dict):
+        return None, None
+    return _number(hits[0].get("e_m")), _number(hits[0].get("n_m"))
+
 
 _HEAD_COLUMNS = (
     "id", "cls", "t_start", "t_end", "e_min", "n_min", "e_max", "n_max", "sensors", "live", "body"
@@ -45,12 +68,41 @@ class PostgresDialect(Dialect):
 
     kind = "postgres"
 
-    upsert_fix = (
-        "INSERT INTO fixes (detection_id, t_s, sensor, cls, status, body) VALUES (?,?,?,?,?,?)"
-        " ON CONFLICT (detection_id) DO UPDATE SET t_s = EXCLUDED.t_s,"
-        " sensor = EXCLUDED.sensor, cls = EXCLUDED.cls, status = EXCLUDED.status,"
-        " body = EXCLUDED.body"
-    )
+    def write_fixes(
+        self, c: Any, rows: Sequence[tuple[Any, ...]], bodies: Sequence[dict[str, Any]]
+    ) -> None:
+        """Upsert the fix rows in one statement, with each one's Point (its first hit).
+
+        A detection given twice keeps its last row (what row-by-row upserts leave).
+        """
+        last: dict[int, int] = {int(r[0]): k for k, r in enumerate(rows)}
+        if not last:
+            return
+        keep = sorted(last.values())
+        cols: list[list[Any]] = [[rows[k][j] for k in keep] for j in range(6)]
+        cols[0] = [int(v) for v in cols[0]]
+        cols[1] = [float(v) for v in cols[1]]
+        xy = [_first_hit(bodies[k]) for k in keep]
+        c.raw.execute(_UPSERT_FIXES, (*cols, [p[0] for p in xy], [p[1] for p in xy]))
+
+    def write_points(self, c: Any, rows: Sequence[tuple[int, int, str]]) -> None:
+        """Insert track points in one statement, with their Points (``e_m``, ``n_m``)."""
+        if not rows:
+            return
+        xy = [loads_json(t) for _, _, t in rows]
+        c.raw.execute(
+            "INSERT INTO track_points (track_id, k, point, geom)"
+            " SELECT i, k, p, ST_MakePoint(e, n)"
+            " FROM unnest(%b::bigint[], %b::integer[], %b::text[], %b::float8[], %b::float8[])"
+            " AS u(i, k, p, e, n)",
+            (
+                [int(r[0]) for r in rows],
+                [int(r[1]) for r in rows],
+                [r[2] for r in rows],
+                [_number(d.get("e_m")) for d in xy],
+                [_number(d.get("n_m")) for d in xy],
+            ),
+        )
 
     first_track_id = "(track_ids::jsonb ->> 0)"
 
@@ -82,13 +134,15 @@ class PostgresDialect(Dialect):
         # sees every event committed before the lock was granted.
         c.execute("SELECT pg_advisory_xact_lock(?)", (EVENT_LOCK,))
         # Numbers, rows and the notification in one statement (one round trip).
-        got = c.execute(
+        # Types and payloads as binary text arrays (a text-format array would be escaped
+        # element by element in Python: 0.1 s for a 500-detection batch).
+        got = c.raw.execute(
             "WITH top AS (SELECT COALESCE(MAX(seq), 0) AS m FROM events),"
             " ins AS (INSERT INTO events (seq, type, payload)"
             " SELECT top.m + u.k, u.type, u.payload FROM top,"
-            " unnest(?::text[], ?::text[]) WITH ORDINALITY AS u(type, payload, k)"
+            " unnest(%b::text[], %b::text[]) WITH ORDINALITY AS u(type, payload, k)"
             " RETURNING seq)"
-            " SELECT top.m, pg_notify(?, (top.m + ?)::text) FROM top",
+            " SELECT top.m, pg_notify(%s, (top.m + %s)::text) FROM top",
             ([k for k, _ in rows], [t for _, t in rows], EVENT_CHANNEL, len(rows)),
         ).fetchone()
         first = int(got[0]) + 1
