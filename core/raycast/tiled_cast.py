@@ -21,6 +21,7 @@ agrees to rounding (well under 1e-9 m), as it says itself.
 
 from __future__ import annotations
 
+import threading
 from typing import Literal
 
 import numpy as np
@@ -34,8 +35,11 @@ from .hits import RayHits
 from .pyramid import pyramid_level_shapes, pyramid_levels_above
 from .tile_cache import CacheStats, TileCache
 
-__all__ = ["FIRST_PASS_HITS", "TiledRayCaster"]
+__all__ = ["DEFAULT_MEMORY_BUDGET", "FIRST_PASS_HITS", "TiledRayCaster"]
 
+#: Budget of decoded blocks (bytes) where a caller names none (a site's geolocator).
+DEFAULT_MEMORY_BUDGET = 1 << 30
+_CAST_LOCK = threading.Lock()
 #: Hits kept per ray in the first pass of ``mode="all"``; rays with more are cast again
 #: with room for ``max_hits`` (as the in-memory caster re-walks them).
 FIRST_PASS_HITS = 8
@@ -111,6 +115,20 @@ class TiledRayCaster:
         ``coherent`` is accepted for the same call surface and ignored (the tiled walk
         has no angular index; the answers are the pyramid walk's).
         """
+        # One cast at a time in a process: a caster's pool, table and round counter are
+        # shared, and numba's default thread pool must not be entered from two threads.
+        with _CAST_LOCK:
+            return self._checked_cast(origins, directions, max_range, mode, max_hits, coherent)
+
+    def _checked_cast(
+        self,
+        origins: np.ndarray,
+        directions: np.ndarray,
+        max_range: float | np.ndarray,
+        mode: str,
+        max_hits: int,
+        coherent: bool | None,
+    ) -> RayHits:
         o, d, rng = _validate_rays(origins, directions, max_range)
         if coherent not in (None, True, False):
             raise RaycastError(f"coherent must be None, True or False, got {coherent!r}")
@@ -121,6 +139,18 @@ class TiledRayCaster:
         first = mode == "first"
         max_hits = 1 if first else int(max_hits)
         cap = 1 if first else min(FIRST_PASS_HITS, max_hits)
+        return self._cast(o, d, rng, first, max_hits, cap)
+
+    def _cast(
+        self,
+        o: np.ndarray,
+        d: np.ndarray,
+        rng: np.ndarray,
+        first: bool,
+        max_hits: int,
+        cap: int,
+    ) -> RayHits:
+        """:meth:`cast` once the rays are checked."""
         n = len(o)
         buf, counts, status, crossed, truncated = self._walk_all(o, d, rng, first, max_hits, cap)
         offsets = np.zeros(n + 1, np.int64)

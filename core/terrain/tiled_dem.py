@@ -238,27 +238,34 @@ class TiledDem:
         return Dem(sub, elev, var, cnt, filled, self.crs_wkt, self.vertical_datum)
 
     def sample(self, x: np.ndarray, y: np.ndarray, band: int = 1) -> np.ndarray:
-        """Bilinear surface at points (m): as :meth:`Dem.sample`, reading only their cells.
+        """Bilinear surface at points (m): as :meth:`Dem.sample`, reading only their blocks.
 
-        NaN outside the hull of cell centres or over a hole. Reads the bounding window of
-        the points, so keep batches local (one camera's hits).
+        NaN outside the hull of cell centres or over a hole. Points are grouped by the
+        patch block they fall in; each block's cells are read once per call.
         """
-        x = np.asarray(x, np.float64)
-        y = np.asarray(y, np.float64)
-        out = np.full(np.broadcast(x, y).shape, np.nan)
-        g = self.grid
+        x, y = np.broadcast_arrays(np.asarray(x, np.float64), np.asarray(y, np.float64))
+        out = np.full(x.shape, np.nan)
+        g, t = self.grid, self.tile
         gx, gy = g.to_grid(x, y)
         ok = np.isfinite(gx) & np.isfinite(gy)
         ok &= (gx >= 0) & (gx <= g.ncols - 1) & (gy >= 0) & (gy <= g.nrows - 1)
-        if not ok.any():
+        idx = np.flatnonzero(ok)
+        if not len(idx):
             return out
-        c0 = int(np.floor(gx[ok].min()))
-        r0 = int(np.floor(gy[ok].min()))
-        c1 = min(int(np.floor(gx[ok].max())) + 2, g.ncols)
-        r1 = min(int(np.floor(gy[ok].max())) + 2, g.nrows)
-        c0, r0 = min(c0, c1 - 2), min(r0, r1 - 2)
-        win = self.read_cells(max(r0, 0), r1, max(c0, 0), c1, band)
-        out[ok] = bilinear_sample(win, gx[ok] - max(c0, 0), gy[ok] - max(r0, 0))
+        gxs, gys = gx.ravel()[idx], gy.ravel()[idx]
+        # The patch a point is in (the last row/column of centres belongs to the one before).
+        ix = np.minimum(np.floor(gxs).astype(np.int64), g.ncols - 2)
+        iy = np.minimum(np.floor(gys).astype(np.int64), g.nrows - 2)
+        key = (iy // t) * (g.ncols // t + 1) + ix // t
+        flat = out.reshape(-1)
+        for k in np.unique(key).tolist():
+            sel = np.flatnonzero(key == k)
+            r0, c0 = int(iy[sel[0]] // t * t), int(ix[sel[0]] // t * t)
+            cells = self.read_cells(
+                r0, min(r0 + t + 1, g.nrows), c0, min(c0 + t + 1, g.ncols), band
+            )
+            # Shifting by whole cells is exact in float64, so the values are Dem.sample's.
+            flat[idx[sel]] = bilinear_sample(cells, gxs[sel] - c0, gys[sel] - r0)
         return out
 
     def sample_variance(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:

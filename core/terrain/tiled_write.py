@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from collections.abc import Callable
 from pathlib import Path
 
@@ -80,9 +81,6 @@ def write_tiled(
         Tiles per chunk along a strip (memory held: about ``chunk_tiles * tile**2 * bands``
         float32 cells, plus the source's own).
     """
-    import rasterio
-    from rasterio.windows import Window
-
     if tile < 16 or tile > 4096 or tile & (tile - 1):
         raise DemError(f"tile must be a power of two from 16 to 4096, got {tile}")
     if compress not in COMPRESSIONS:
@@ -94,8 +92,7 @@ def write_tiled(
         raise DemError(f"a tiled DEM needs at least 2 x 2 cells, got {nrows} x {ncols}")
     nby, nbx = patch_blocks(nrows, ncols, tile)
     minmax = np.empty((nby, nbx, 2), np.float32)
-    z_lo, z_hi, holes = math.inf, -math.inf, False
-    profile = {
+    profile: dict[str, object] = {
         "driver": "GTiff",
         "height": nrows,
         "width": ncols,
@@ -114,10 +111,37 @@ def write_tiled(
     if crs_wkt:
         profile["crs"] = crs_wkt
     width = tile * max(1, int(chunk_tiles))
-    with (
-        rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB),
-        rasterio.open(Path(path), "w", **profile) as dst,
-    ):
+    # Written under a temporary name and renamed when complete: a failed write leaves
+    # no file that looks like a tiled DEM.
+    path = Path(path)
+    part = path.with_name(path.name + ".partial")
+    try:
+        _write(part, profile, grid, source, bands, tile, width, minmax, vertical_datum)
+        os.replace(part, path)
+    finally:
+        part.unlink(missing_ok=True)
+    return TiledDem.open(path)
+
+
+def _write(
+    part: Path,
+    profile: dict[str, object],
+    grid: GridSpec,
+    source: CellSource,
+    bands: int,
+    tile: int,
+    width: int,
+    minmax: np.ndarray,
+    vertical_datum: str,
+) -> None:
+    """:func:`write_tiled`'s strip loop into ``part``."""
+    import rasterio
+    from rasterio.windows import Window
+
+    nrows, ncols = grid.shape
+    nby, nbx = minmax.shape[:2]
+    z_lo, z_hi, holes = math.inf, -math.inf, False
+    with rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB), rasterio.open(part, "w", **profile) as dst:
         for r0 in range(0, nrows, tile):
             r1 = min(r0 + tile, nrows)
             for c0 in range(0, ncols, width):
@@ -147,7 +171,6 @@ def write_tiled(
         )
         for b, name in enumerate(("elevation_m", "variance_m2", "count")[:bands], start=1):
             dst.set_band_description(b, name)
-    return TiledDem.open(path)
 
 
 def write_dem_tiled(dem: Dem, path: str | Path, **kwargs: object) -> TiledDem:

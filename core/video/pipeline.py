@@ -125,9 +125,11 @@ class VideoDetections:
         *,
         require_travel: bool = False,
         scale_min_area: bool = True,
+        whole_only: bool = True,
     ) -> None:
         self.reader = reader
         self.require_travel = bool(require_travel)
+        self.whole_only = bool(whole_only)
         self.detector = detector
         self.sensor = sensor
         self.classifier = classifier or BlobClassifier()
@@ -163,6 +165,8 @@ class VideoDetections:
             cls = track.voted_class(self.tracker.min_history)
             if cls is None or cls == CLUTTER or (self.require_travel and not track.moved):
                 continue
+            if self.whole_only and (tb.frame_cls != cls or (cls == "vehicle" and tb.partial)):
+                continue  # a part of the object (hidden, cut): its foot is not the object's
             dets.append(
                 Detection(t_s, self.sensor, tb.blob.bbox, cls, round(tb.score, 3), tb.local_id)
             )

@@ -34,6 +34,11 @@ def _check_disk(out: Path, cells: int, bands: int) -> None:
         )
 
 
+def _check_tile(tile: int) -> None:
+    if tile < 16 or tile > 4096 or tile & (tile - 1):
+        raise InputFileError(f"--tile must be a power of two from 16 to 4096, got {tile}")
+
+
 def _report(kind: str, out: Path, t0: float) -> None:
     from demtrack.core.terrain.tiled_dem import TiledDem
 
@@ -54,6 +59,7 @@ def _run_tile(args: argparse.Namespace) -> int:
     from demtrack.core.terrain.tiled_write import tile_geotiff
 
     require_suffix(args.output, (".tif", ".tiff"), "--output")
+    _check_tile(args.tile)
     if not args.dem.is_file():
         raise InputFileError(f"DEM {args.dem} does not exist")
     try:
@@ -76,6 +82,7 @@ def _run_synth(args: argparse.Namespace) -> int:
     require_suffix(args.output, (".tif", ".tiff"), "--output")
     if args.size < 2:
         raise InputFileError(f"--size must be at least 2 cells, got {args.size}")
+    _check_tile(args.tile)
     _check_disk(args.output, args.size * args.size, 1)
     t0 = time.perf_counter()
     print(f"writing {args.size} x {args.size} cells to {args.output} ...", file=sys.stderr)

@@ -13,7 +13,7 @@ import os
 import random
 from collections.abc import Callable
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import pyarrow as pa
@@ -32,6 +32,7 @@ class RunResult:
 
     geo: list[GeoResult]
     tracks: list[list[Any]]
+    notes: dict[str, Any] = field(default_factory=dict)
 
 
 def _part_args(plan: Plan, table: pa.Table, k: int) -> tuple[pa.Table, Any]:
@@ -97,13 +98,14 @@ def dask_client(workers: int, scheduler: str | None, timeout_s: float = 20.0) ->
         cluster.close()
 
 
-def _kill_one_worker(client: Any) -> None:
-    """Make one worker process exit at once (its nanny starts a new one)."""
+def _kill_one_worker(client: Any) -> str:
+    """Make one worker process exit at once (its nanny starts a new one); its address."""
     addr = sorted(client.scheduler_info()["workers"])[0]
     try:
-        client.run(os._exit, 1, workers=[addr], wait=False)
-    except Exception:  # noqa: BLE001  (the worker is gone: that was the point)
+        client.run(os._exit, 1, workers=[addr])
+    except Exception:  # noqa: BLE001, S110  (the worker is gone: that was the point)
         pass
+    return str(addr)
 
 
 def run_dask(
@@ -162,6 +164,7 @@ def run_dask(
         from distributed import progress as dask_progress
 
         dask_progress(every)  # a text bar on stdout, or a widget in a notebook
+    notes: dict[str, Any] = {}
     if kill_after is not None:
         done = 0
         for _ in as_completed(every):
@@ -169,8 +172,12 @@ def run_dask(
             if on_done is not None:
                 on_done(done)
             if done == kill_after:
-                _kill_one_worker(client)
+                notes["killed_worker"] = _kill_one_worker(client)
     wait(every)
     geo_results = [geo[k].result() for k in range(len(plan.parts))]
     tracks = [segment_tracks(client.gather(chains[s])) for s in range(len(plan.segments))]
-    return RunResult(geo_results, tracks)
+    if "killed_worker" in notes:
+        notes["killed_worker_gone"] = (
+            notes["killed_worker"] not in client.scheduler_info()["workers"]
+        )
+    return RunResult(geo_results, tracks, notes)

@@ -87,7 +87,9 @@ def _execute(
             plan, read.table, site_dir, s.method, client, shuffle_seed=s.shuffle_seed,
             kill_after=s.kill_after, progress=s.progress,
         )  # fmt: skip
-        return result, {"engine": "dask", "workers": n_workers, "scheduler": s.scheduler}
+        return result, {
+            "engine": "dask", "workers": n_workers, "scheduler": s.scheduler, **result.notes,
+        }  # fmt: skip
 
 
 def reprocess(

@@ -77,7 +77,7 @@ def delete_marker(store: StoreBackend, marker_id: int) -> tuple[int, str] | None
     """Remove marker ``marker_id``; announce it. None when there is no such marker."""
 
     def tx(c: Any) -> tuple[int, str] | None:
-        if c.execute("DELETE FROM markers WHERE id = ?", (marker_id,)).rowcount == 0:
+        if not c.execute("DELETE FROM markers WHERE id = ? RETURNING id", (marker_id,)).fetchall():
             return None
         return _append_event(
             store, c, {"type": "marker", "action": "delete", "id": marker_id, "marker": None}

@@ -11,10 +11,12 @@ password) and :func:`is_postgres_url` tells a database URL from a file path.
 from __future__ import annotations
 
 import functools
+import re
 from collections.abc import Iterable, Sequence
 from typing import Any
 from urllib.parse import urlsplit, urlunsplit
 
+import msgspec
 import psycopg
 
 __all__ = ["QmarkConnection", "connect", "is_postgres_url", "safe_url"]
@@ -59,8 +61,9 @@ def _pg(sql: str) -> str:
 class QmarkConnection:
     """A psycopg connection that takes ``?`` placeholders (the store's shared SQL).
 
-    ``execute`` returns the psycopg cursor (``fetchone``, ``fetchall``, iteration,
-    ``rowcount``); ``raw`` is the connection itself.
+    ``execute`` returns the psycopg cursor (``fetchone``, ``fetchall``, iteration; not
+    ``rowcount``, which the store's pipelined writes do not have yet: the shared SQL reads
+    ``RETURNING`` rows instead); ``raw`` is the connection itself.
     """
 
     def __init__(self, raw: psycopg.Connection[Any]) -> None:
@@ -71,9 +74,55 @@ class QmarkConnection:
         return self.raw.execute(_pg(sql), params if params else None)  # type: ignore[arg-type]
 
     def executemany(self, sql: str, rows: Iterable[Sequence[Any]]) -> psycopg.Cursor[Any]:
-        """Run one statement once per row of parameters (pipelined by psycopg)."""
+        """Run one statement for every row of parameters.
+
+        An ``INSERT INTO t (cols) VALUES (?,...)``, optionally ``ON CONFLICT (col) DO ...``,
+        runs as one statement over all rows: the rows go as one JSON array that
+        ``json_populate_recordset`` turns into rows of the table's own types (one round
+        trip, one firing of the statement-level triggers, one fixed statement text that
+        psycopg prepares once). Floats survive exactly: msgspec writes the shortest text
+        that reads back as the same double, and PostgreSQL reads it correctly rounded. An
+        upsert keeps the last row of each key (what row-by-row upserts leave). Anything
+        else runs once per row, pipelined by psycopg.
+        """
         cur = self.raw.cursor()
         rows = list(rows)
-        if rows:
+        if not rows:
+            return cur
+        plan = _bulk_plan(sql)
+        if plan is None:
             cur.executemany(_pg(sql), rows)  # type: ignore[arg-type]
+            return cur
+        text, cols, key = plan
+        if key is not None:  # one row per key, the last (ON CONFLICT may not hit a row twice)
+            rows = list({r[key]: r for r in rows}.values())
+        doc = _ENCODER.encode([dict(zip(cols, r, strict=True)) for r in rows])
+        cur.execute(text, (doc.decode(),))  # type: ignore[arg-type]
         return cur
+
+
+_ENCODER = msgspec.json.Encoder()
+
+_INSERT = re.compile(
+    r"\s*INSERT INTO (\w+) \(([\w\s,]+)\) VALUES \(([?,\s]+)\)"
+    r"(\s+ON CONFLICT \((\w+)\) DO .*)?",
+    re.DOTALL | re.IGNORECASE,
+)
+
+
+@functools.lru_cache(maxsize=256)
+def _bulk_plan(sql: str) -> tuple[str, tuple[str, ...], int | None] | None:
+    """``(statement, columns, key index or None)`` of a bulk insert, or None (see above)."""
+    m = _INSERT.fullmatch(sql)
+    if m is None or "RETURNING" in sql.upper():
+        return None
+    table, col_text, marks, tail, key = m.groups()
+    cols = tuple(c.strip() for c in col_text.split(","))
+    if marks.count("?") != len(cols):
+        return None
+    names = ", ".join(cols)
+    text = (
+        f"INSERT INTO {table} ({names}) SELECT {names} FROM"  # noqa: S608 (the store's own SQL)
+        f" json_populate_recordset(NULL::{table}, %s::json){tail or ''}"
+    )
+    return text, cols, (cols.index(key) if key else None)

@@ -207,8 +207,10 @@ def m5_row_counts(conn: psycopg.Connection[Any]) -> None:
         """
         CREATE FUNCTION row_counts_add() RETURNS trigger LANGUAGE plpgsql AS $$
         BEGIN
-            UPDATE row_counts SET n = n + (SELECT count(*) FROM new_rows)
-                WHERE name = TG_TABLE_NAME;
+            IF EXISTS (SELECT 1 FROM new_rows) THEN  -- an upsert that only updated: no write
+                UPDATE row_counts SET n = n + (SELECT count(*) FROM new_rows)
+                    WHERE name = TG_TABLE_NAME;
+            END IF;
             RETURN NULL;
         END $$
         """
@@ -217,8 +219,10 @@ def m5_row_counts(conn: psycopg.Connection[Any]) -> None:
         """
         CREATE FUNCTION row_counts_sub() RETURNS trigger LANGUAGE plpgsql AS $$
         BEGIN
-            UPDATE row_counts SET n = n - (SELECT count(*) FROM old_rows)
-                WHERE name = TG_TABLE_NAME;
+            IF EXISTS (SELECT 1 FROM old_rows) THEN  -- an upsert that only updated: no write
+                UPDATE row_counts SET n = n - (SELECT count(*) FROM old_rows)
+                    WHERE name = TG_TABLE_NAME;
+            END IF;
             RETURN NULL;
         END $$
         """
