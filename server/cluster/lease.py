@@ -25,7 +25,7 @@ from typing import Any
 
 from ..store.integrity import StoreUnavailableError
 
-__all__ = ["FencedOut", "LEASE_TABLE", "SiteLease"]
+__all__ = ["FencedOut", "LEASE_LOCK", "LEASE_TABLE", "SiteLease"]
 
 #: The lease table (created on first use; PostgreSQL only).
 LEASE_TABLE = """
@@ -36,6 +36,10 @@ CREATE TABLE IF NOT EXISTS site_lease (
     expires_at timestamptz NOT NULL
 )
 """
+
+#: The advisory lock under which the table is created (``"demtrack" 4``, beside the
+#: store's own keys).
+LEASE_LOCK = 0x64656D_0004
 
 _ACQUIRE = """
 INSERT INTO site_lease AS l (site_id, owner, token, expires_at)
@@ -79,6 +83,11 @@ class SiteLease:
         The database's ``postgresql://`` URL.
     connect : callable, optional
         ``connect(url)`` -> an autocommit psycopg connection (the default opens one).
+    lock_timeout_s : float
+        Longest wait of a call for the lease row (s): a holder's write transaction
+        keeps it share-locked, and a holder paused inside one (a stopped process) would
+        otherwise hold a takeover attempt indefinitely; the attempt fails instead
+        (``psycopg.errors.LockNotAvailable``) and is retried.
 
     Notes
     -----
@@ -86,14 +95,26 @@ class SiteLease:
     server's shutdown release may come from different threads.
     """
 
-    def __init__(self, url: str, connect: Callable[[str], Any] | None = None) -> None:
+    def __init__(
+        self,
+        url: str,
+        connect: Callable[[str], Any] | None = None,
+        lock_timeout_s: float = 5.0,
+    ) -> None:
         import psycopg
 
         self.url = url
-        self._conn = connect(url) if connect is not None else psycopg.connect(url, autocommit=True)
+        self._conn = (
+            connect(url)
+            if connect is not None
+            else psycopg.connect(url, autocommit=True, application_name="demtrack-lease")
+        )
         self._lock = threading.Lock()
         with self._lock:
-            self._conn.execute(LEASE_TABLE)
+            self._conn.execute(f"SET lock_timeout = {int(lock_timeout_s * 1000)}")
+            with self._conn.transaction():  # two processes starting at once: one creates it
+                self._conn.execute("SELECT pg_advisory_xact_lock(%s)", (LEASE_LOCK,))
+                self._conn.execute(LEASE_TABLE)
 
     def close(self) -> None:
         """Close the connection (a held lease is left to expire: call :meth:`release`)."""

@@ -51,6 +51,6 @@ def start_node(
     """
     store = pipeline.store
     tail = EventTail(url, store.events_since, publish, store.last_seq()).start()
-    lease = SiteLease(url)
+    lease = SiteLease(url, lock_timeout_s=ttl_s)
     role = ClusterRole(lease, pipeline, site_id, ttl_s)
     return ClusterNode(lease, role, tail, role.start())

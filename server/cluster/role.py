@@ -130,6 +130,14 @@ class ClusterRole:
             log.error("taking over the tracking stopped: %s", exc)
             self._lose(token)
             return None
+        except Exception:  # noqa: BLE001 - never hold a lease one does not track with
+            log.exception("taking over the tracking failed; handing the lease back")
+            self._lose(token)
+            try:
+                self.lease.release(self.site_id, self.owner, token)
+            except Exception:  # noqa: BLE001 - it expires by itself
+                log.warning("could not release the site lease; it expires in %g s", self.ttl_s)
+            return None
         with self._lock:
             if self.token != token:  # lost while replaying
                 self.pipeline.tracking = False

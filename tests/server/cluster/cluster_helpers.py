@@ -1,25 +1,30 @@
 """Helpers of the cluster tests: real ``demtrack serve`` processes on one PostgreSQL database.
 
-Imported by file name (tests are not a package). The servers come from
-``server_helpers.start_server`` with ``--database-url``; batches are posted over HTTP and
+Imported by file name (tests are not a package). The servers are
+``demtrack serve --database-url`` processes logging to files; batches are posted over HTTP and
 the database is read directly to know when the tracker has caught up.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import re
+import subprocess
+import sys
 import time
 import urllib.request
 from pathlib import Path
 from typing import Any
 
 import psycopg
-from server_helpers import AUTH, TOKEN, scenario_records, start_server
+from server_helpers import AUTH, TOKEN, scenario_records
 
 __all__ = [
     "AUTH",
     "TOKEN",
     "get_json",
+    "log_text",
     "post_batch",
     "scenario_batches",
     "serve_on",
@@ -48,17 +53,36 @@ def scenario_batches(site: Any, until_s: float, span_s: float = 0.5) -> list[lis
 
 
 def serve_on(site: Path, tmp: Path, name: str, database_url: str, ttl_s: float = 2.0):
-    """``demtrack serve`` on ``database_url`` as a real process: ``(process, base URL)``."""
+    """``demtrack serve`` on ``database_url`` as a real process: ``(process, base URL)``.
+
+    Its output goes to ``tmp/<name>.log`` (read it with :func:`log_text`).
+    """
     tmp.mkdir(parents=True, exist_ok=True)
-    return start_server(
-        site,
-        tmp / f"{name}.sqlite3",  # unused on PostgreSQL (the token file's place)
-        "--database-url",
-        database_url,
-        timeout_s=180,
-        DEMTRACK_LEASE_TTL_S=str(ttl_s),
-        DEMTRACK_EVENTS="false",
-    )
+    log = tmp / f"{name}.log"
+    env = {
+        **os.environ,
+        "DEMTRACK_TOKEN": TOKEN,
+        "DEMTRACK_LEASE_TTL_S": str(ttl_s),
+        "DEMTRACK_EVENTS": "false",
+    }
+    cmd = [sys.executable, "-m", "demtrack.cli", "serve", "--site", str(site)]
+    cmd += ["--db", str(tmp / f"{name}.sqlite3")]  # unused on PostgreSQL but the token's place
+    cmd += ["--database-url", database_url, "--port", "0", "--no-warm-up", "--log-level", "info"]
+    with log.open("w") as out:
+        proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=env)
+    deadline = time.monotonic() + 180
+    while time.monotonic() < deadline and proc.poll() is None:
+        m = re.search(r"Uvicorn running on (http://[\d.]+:\d+)", log.read_text())
+        if m:
+            return proc, m.group(1)
+        time.sleep(0.1)
+    proc.kill()
+    raise AssertionError(f"server {name} did not start:\n{log.read_text()[-3000:]}")
+
+
+def log_text(tmp: Path, name: str) -> str:
+    """What server ``name`` (started by :func:`serve_on` in ``tmp``) has logged."""
+    return (tmp / f"{name}.log").read_text()
 
 
 def stop(proc: Any) -> None:

@@ -19,6 +19,7 @@ import pytest
 from cluster_helpers import (
     TOKEN,
     get_json,
+    log_text,
     post_batch,
     scenario_batches,
     serve_on,
@@ -147,6 +148,41 @@ def test_follower_takes_over_after_the_leader_is_killed(
         assert get_json(b, "/api/tracks") == reference
         stored = stream_rows(postgres_url)
         _same_stream(console.wait_for(stored[-1][0]), stored)
+    finally:
+        stop(leader)
+        if follower is not None:
+            stop(follower)
+
+
+def test_a_paused_leader_is_fenced_out_when_it_resumes(
+    sample_site_dir: Path, tmp_path: Path, postgres_url: str, batches, reference
+) -> None:
+    """SIGSTOP the leader past its lease: the follower takes over; resumed, the old leader
+    still believes it tracks until its first write is refused, and the tracks stay one set."""
+    leader, a = serve_on(sample_site_dir, tmp_path, "a", postgres_url, TTL_S)
+    follower = None
+    third = len(batches) // 3
+    try:
+        follower, b = serve_on(sample_site_dir, tmp_path, "b", postgres_url, TTL_S)
+        for k, batch in enumerate(batches[:third]):
+            post_batch(a if k % 2 == 0 else b, batch)
+        wait_tracked(postgres_url)  # the leader is idle: it holds no transaction open
+        os.kill(leader.pid, signal.SIGSTOP)
+        try:
+            for batch in batches[third : 2 * third]:
+                post_batch(b, batch)
+            wait_tracked(postgres_url)  # the follower took over
+            assert f":{follower.pid}:" in _holder(postgres_url)
+        finally:
+            os.kill(leader.pid, signal.SIGCONT)
+        for k, batch in enumerate(batches[2 * third :]):  # the old leader gets batches at once
+            post_batch(a if k % 2 == 0 else b, batch)
+        wait_tracked(postgres_url)
+        assert f":{follower.pid}:" in _holder(postgres_url)
+        assert get_json(a, "/api/tracks") == reference
+        assert get_json(b, "/api/tracks") == reference
+        assert "stops tracking" in log_text(tmp_path, "a")
+        assert "stops tracking" not in log_text(tmp_path, "b")
     finally:
         stop(leader)
         if follower is not None:
