@@ -1,4 +1,4 @@
-"""``demtrack bench raycast|viewshed|server|pipeline|console-soak|lidar-holdout|video``."""
+"""``demtrack bench NAME``: the benchmarks (``bench/``), one subcommand each."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ def _run(args: argparse.Namespace) -> int:
         lidar_holdout,
         pipeline_replay,
         raycast,
+        reprocess_bench,
         server_bench,
         video_detect,
         viewshed,
@@ -24,6 +25,7 @@ def _run(args: argparse.Namespace) -> int:
         "pipeline": pipeline_replay.main,
         "lidar-holdout": lidar_holdout.main,
         "video": video_detect.main,
+        "reprocess": reprocess_bench.main,
     }
     if args.bench == "console-soak":  # Playwright is imported only for this one
         from demtrack.bench import console_soak
@@ -65,6 +67,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         add_help=False,
     )
     vd.set_defaults(func=_run)
+    rp = bsub.add_parser(
+        "reprocess",
+        help="archive reprocessing: local detections/s, Dask at 1, 2, 4 workers, overhead",
+        add_help=False,
+    )
+    rp.set_defaults(func=_run)
     c = bsub.add_parser(
         "console-soak",
         help="the console in Chromium over a long replay at 10x with about 20 tracks",
