@@ -1,7 +1,4 @@
-"""``demtrack bench raycast|viewshed|server|pipeline|console-soak|lidar-holdout|video|large-dem``.
-
-Each job parses its own options (``demtrack bench NAME --help``).
-"""
+"""``demtrack bench NAME``: the benchmarks (``bench/``), one subcommand each."""
 
 from __future__ import annotations
 
@@ -16,6 +13,7 @@ def _run(args: argparse.Namespace) -> int:
         lidar_holdout,
         pipeline_replay,
         raycast,
+        reprocess_bench,
         server_bench,
         video_detect,
         viewshed,
@@ -29,6 +27,7 @@ def _run(args: argparse.Namespace) -> int:
         "lidar-holdout": lidar_holdout.main,
         "video": video_detect.main,
         "large-dem": large_dem.main,
+        "reprocess": reprocess_bench.main,
     }
     if args.bench == "console-soak":  # Playwright is imported only for this one
         from demtrack.bench import console_soak
@@ -76,6 +75,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         add_help=False,
     )
     ld.set_defaults(func=_run)
+    rp = bsub.add_parser(
+        "reprocess",
+        help="archive reprocessing: local detections/s, Dask at 1, 2, 4 workers, overhead",
+        add_help=False,
+    )
+    rp.set_defaults(func=_run)
     c = bsub.add_parser(
         "console-soak",
         help="the console in Chromium over a long replay at 10x with about 20 tracks",

@@ -2,9 +2,9 @@
 
 Both call the same task functions (:mod:`.tasks`) on the same inputs, and each segment's
 windows in the same order (a window's task waits for the one before), so their results
-are equal. On Dask, geolocation parts run in parallel; each segment is one chain of
-window tasks, and segments run in parallel. A worker lost mid-run costs its tasks a
-rerun (Dask recomputes what it held, from the inputs the client keeps).
+are equal. On Dask, geolocation parts run in parallel, and tracking jobs (a long
+segment's chain of windows, or a pack of short segments) run in parallel. A worker lost
+mid-run costs its tasks a rerun (Dask recomputes what it held, from the inputs the client keeps).
 """
 
 from __future__ import annotations
@@ -21,7 +21,14 @@ import pyarrow as pa
 from demtrack.core.errors import InputFileError
 
 from .plan import Plan
-from .tasks import GeoResult, WindowResult, geolocate_part, segment_tracks, track_window
+from .tasks import (
+    GeoResult,
+    WindowResult,
+    geolocate_part,
+    segment_tracks,
+    track_segments,
+    track_window,
+)
 
 __all__ = ["RunResult", "dask_client", "run_dask", "run_local"]
 
@@ -40,21 +47,40 @@ def _part_args(plan: Plan, table: pa.Table, k: int) -> tuple[pa.Table, Any]:
     return table.take(part.rows), part.rows
 
 
+def _job_parts(plan: Plan, job: tuple[int, ...]) -> list[int]:
+    return sorted({k for s in job for k in plan.segments[s].parts})
+
+
+def _specs(plan: Plan, job: tuple[int, ...]) -> list[tuple[int, float, float]]:
+    return [(plan.segments[s].seed, plan.segments[s].t_first, plan.segments[s].t_last) for s in job]
+
+
+def _chained(plan: Plan, job: tuple[int, ...]) -> bool:
+    return len(job) == 1 and len(plan.segments[job[0]].windows) > 1
+
+
 def run_local(plan: Plan, table: pa.Table, site_dir: str, method: str) -> RunResult:
     """Run every task here, one after another."""
     geo = [geolocate_part(site_dir, *_part_args(plan, table, k)) for k in range(len(plan.parts))]
-    tracks = []
-    for seg in plan.segments:
+    tracks: list[list[Any]] = [[] for _ in plan.segments]
+    for job in plan.jobs:
+        if not _chained(plan, job):
+            got = track_segments(
+                site_dir, method, _specs(plan, job), [geo[k] for k in _job_parts(plan, job)]
+            )
+            for s, seg_tracks in zip(job, got, strict=True):
+                tracks[s] = seg_tracks
+            continue
+        seg = plan.segments[job[0]]
         results: list[WindowResult] = []
         prev: WindowResult | None = None
         for w, window in enumerate(seg.windows):
-            parts = _window_parts(plan, seg.parts, window)
+            parts = [geo[k] for k in _window_parts(plan, seg.parts, window)]
             last = w == len(seg.windows) - 1
-            prev = track_window(
-                site_dir, method, seg.seed, prev, [geo[k] for k in parts], window, last
-            )
+            bounds = (seg.t_first, seg.t_last)
+            prev = track_window(site_dir, method, seg.seed, prev, parts, window, last, bounds)
             results.append(prev)
-        tracks.append(segment_tracks(results))
+        tracks[job[0]] = segment_tracks(results)
     return RunResult(geo, tracks)
 
 
@@ -135,11 +161,11 @@ def run_dask(
     from distributed import as_completed, wait
 
     order = list(range(len(plan.parts)))
-    seg_order = list(range(len(plan.segments)))
+    job_order = list(range(len(plan.jobs)))
     if shuffle_seed is not None:
         rng = random.Random(shuffle_seed)
         rng.shuffle(order)
-        rng.shuffle(seg_order)
+        rng.shuffle(job_order)
     geo: dict[int, Any] = {}
     for k in order:
         rows, ids = _part_args(plan, table, k)
@@ -147,18 +173,35 @@ def run_dask(
             geolocate_part, site_dir, rows, ids, key=plan.parts[k].key, pure=False, retries=2
         )
     chains: dict[int, list[Any]] = {}
-    for s in seg_order:
-        seg = plan.segments[s]
+    for j in job_order:
+        job = plan.jobs[j]
+        if not _chained(plan, job):
+            parts = [geo[k] for k in _job_parts(plan, job)]
+            chains[j] = [
+                client.submit(
+                    track_segments,
+                    site_dir,
+                    method,
+                    _specs(plan, job),
+                    parts,
+                    key=f"track-{plan.segments[job[0]].key}-n{len(job)}",
+                    pure=False,
+                    retries=2,
+                )  # fmt: skip
+            ]
+            continue
+        seg = plan.segments[job[0]]
         prev = None
         futs = []
         for w, window in enumerate(seg.windows):
             parts = [geo[k] for k in _window_parts(plan, seg.parts, window)]
             prev = client.submit(
                 track_window, site_dir, method, seg.seed, prev, parts, window,
-                w == len(seg.windows) - 1, key=f"track-{seg.key}-w{w}", pure=False, retries=2,
+                w == len(seg.windows) - 1, (seg.t_first, seg.t_last),
+                key=f"track-{seg.key}-w{w}", pure=False, retries=2,
             )  # fmt: skip
             futs.append(prev)
-        chains[s] = futs
+        chains[j] = futs
     every = list(geo.values()) + [f for c in chains.values() for f in c]
     if progress:
         from distributed import progress as dask_progress
@@ -175,7 +218,14 @@ def run_dask(
                 notes["killed_worker"] = _kill_one_worker(client)
     wait(every)
     geo_results = [geo[k].result() for k in range(len(plan.parts))]
-    tracks = [segment_tracks(client.gather(chains[s])) for s in range(len(plan.segments))]
+    tracks: list[list[Any]] = [[] for _ in plan.segments]
+    for j, job in enumerate(plan.jobs):
+        got = client.gather(chains[j])
+        if _chained(plan, job):
+            tracks[job[0]] = segment_tracks(got)
+        else:
+            for s, seg_tracks in zip(job, got[0], strict=True):
+                tracks[s] = seg_tracks
     if "killed_worker" in notes:
         notes["killed_worker_gone"] = (
             notes["killed_worker"] not in client.scheduler_info()["workers"]

@@ -101,6 +101,7 @@ def write_outputs(
         "geolocation_skipped": dict(sorted(skipped.items())),
         "groups": [list(g) for g in plan.groups],
         "n_segments": len(plan.segments),
+        "n_jobs": len(plan.jobs),
         "n_parts": len(plan.parts),
         "quiet_s": plan.quiet_s,
         "window_s": plan.window_s,

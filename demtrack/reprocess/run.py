@@ -87,6 +87,8 @@ def _execute(
             plan, read.table, site_dir, s.method, client, shuffle_seed=s.shuffle_seed,
             kill_after=s.kill_after, progress=s.progress,
         )  # fmt: skip
+        if s.progress and s.say is not None:
+            s.say("")  # the progress bar's line ends without a newline
         return result, {
             "engine": "dask", "workers": n_workers, "scheduler": s.scheduler, **result.notes,
         }  # fmt: skip

@@ -105,20 +105,23 @@ def track_window(
     parts: Sequence[GeoResult],
     window: tuple[float, float],
     last: bool,
+    bounds: tuple[float, float] = (-np.inf, np.inf),
 ) -> WindowResult:
-    """Feed one window's fixes (``window[0] <= t < window[1]``) to the segment's tracker.
+    """Feed one window's fixes to a segment's tracker.
 
-    ``previous`` is the window before's result (None for a segment's first window: a
-    fresh tracker seeded with ``seed``). The tracker continues exactly where it was:
-    the same object state, random generator included, as one long run.
+    The window's fixes are those of ``parts`` with ``window[0] <= t < window[1]`` and
+    ``bounds[0] <= t <= bounds[1]`` (the segment's first and last times). ``previous`` is
+    the window before's result (None for a segment's first window: a fresh tracker
+    seeded with ``seed``). The tracker continues exactly where it was: the same object
+    state, random generator included, as one long run.
     """
     site = site_at(site_dir)
     tracker = _new_tracker(site, method, seed) if previous is None else previous.tracker
     if tracker is None:
         raise ValueError("internal: a window after the segment's last one")
     cols = FixColumns.concat([p.fixes for p in parts])
-    lo, hi = window
-    inside = np.flatnonzero((cols.t_s >= lo) & (cols.t_s < hi))
+    lo, hi = max(window[0], bounds[0]), window[1]
+    inside = np.flatnonzero((cols.t_s >= lo) & (cols.t_s < hi) & (cols.t_s <= bounds[1]))
     cols = cols.take(inside).sorted()
     for fix in cols.to_fixes():
         tracker.update(fix, index=fix.detection_index)
@@ -128,6 +131,22 @@ def track_window(
     held = {t.id: t for t in tracker.tracks()}
     done = [held[i] for i in sorted(tracker.drop_ended(np.inf)) if i in held]
     return WindowResult(tracker, done)
+
+
+def track_segments(
+    site_dir: str,
+    method: str,
+    specs: Sequence[tuple[int, float, float]],
+    parts: Sequence[GeoResult],
+) -> list[list[Track]]:
+    """Track one-window segments one after the other, each with its own fresh tracker.
+
+    ``specs`` are ``(seed, t_first, t_last)`` per segment; returns each one's tracks.
+    """
+    return [
+        track_window(site_dir, method, seed, None, parts, (-np.inf, np.inf), True, (a, b)).tracks
+        for seed, a, b in specs
+    ]
 
 
 def segment_tracks(results: Sequence[WindowResult]) -> list[Track]:
