@@ -203,7 +203,7 @@ class VsamDetector:
         if m.shape != self.size[::-1] or not np.isfinite(m).all() or (m < 1).any():
             raise VideoError(f"min_area_px must be a finite (h, w) = {self.size[::-1]} map >= 1")
         if self.scale > 1:
-            m = cv2.resize(m, self.work_size, interpolation=cv2.INTER_AREA)
+            m = np.asarray(cv2.resize(m, self.work_size, interpolation=cv2.INTER_AREA), np.float32)
         self.min_area = np.ascontiguousarray(m)
 
     def _prepare(self, image: np.ndarray) -> np.ndarray:
@@ -232,7 +232,8 @@ class VsamDetector:
                 # threshold: k sigma <= k calm_factor median
                 floor = float(np.median(thr[::8, ::8])) / self.k
                 limit = max(self.k * self.calm_factor * floor, self.min_diff)
-                self._calm = cv2.erode(cv2.compare(thr, limit, cv2.CMP_LE), self._calm_kernel)
+                calm = np.where(thr <= limit, np.uint8(255), np.uint8(0))
+                self._calm = cv2.erode(calm, self._calm_kernel)
         if self._thr is None:
             raise VideoError("no background model yet")
         return self._thr
