@@ -11,6 +11,9 @@ committed only after ``min_history`` frames (Lipton et al.'s temporal consistenc
 clutter votes counted: a track that is mostly clutter is reported as clutter. A track
 is a moving object (``moved``) once it has travelled half a box diagonal from where it
 appeared: motion that goes nowhere (a tree crown in the wind) is not an object.
+A track is seen only in part (``partial``) while its object slides behind, or out from
+behind, an occluder: one side edge of its box stands still while the other moves
+steadily (:func:`partial_view`).
 """
 
 from __future__ import annotations

@@ -232,7 +232,7 @@ class VsamDetector:
                 # threshold: k sigma <= k calm_factor median
                 floor = float(np.median(thr[::8, ::8])) / self.k
                 limit = max(self.k * self.calm_factor * floor, self.min_diff)
-                calm = np.where(thr <= np.float32(limit), np.uint8(255), np.uint8(0))  # cv2.CMP_LE
+                calm = np.where(thr <= limit, np.uint8(255), np.uint8(0))
                 self._calm = cv2.erode(calm, self._calm_kernel)
         if self._thr is None:
             raise VideoError("no background model yet")

@@ -6,7 +6,14 @@ geolocated foot point and votes the class over the blob's track. Output runs a f
 are released once the tracks have that many more frames of history, so each carries the
 majority class of its track including its near future, a track too short to commit
 (a flicker) never comes out, and records still leave in time order. Clutter is dropped
-(and, with ``require_travel``, a track that has not yet travelled in the image).
+(and, with ``require_travel``, a track that has not yet travelled in the image), and so
+is a blob that is only a part of its object (``whole_only``): its own class this frame
+is not its track's, or it is a vehicle's sliding past an occluder's edge
+(:func:`~.blob_tracker.partial_view`); its bottom-centre is not the object's foot, and
+such feet from two cameras split one car into two tracks downstream.
+
+With a metric classifier and the VSAM detector, the detector's minimum blob area follows
+a person's size at the foot pixel (:mod:`.scale`).
 
 Detectors by name (:func:`make_detector`): ``vsam`` (the default,
 :class:`~.detector.VsamDetector`), ``mog2``, ``knn`` (OpenCV), ``onnx:PATH`` (a
@@ -113,6 +120,8 @@ class VideoDetections:
         With a metric classifier and the VSAM detector, the detector's minimum blob area
         becomes 40 % of a person's area at each foot pixel (:mod:`.scale`; at least 4 px,
         at most the detector's own minimum), so that far walkers a few pixels wide stay.
+    whole_only : bool
+        Withhold the blobs that are only a part of their object (module docstring).
     """
 
     def __init__(
