@@ -21,10 +21,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from datetime import datetime, timedelta
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from demtrack.core.errors import InputFileError
 from demtrack.core.io.times import parse_iso_time
 from demtrack.core.io.track_io import (
     TRACK_FORMATS,
@@ -37,13 +39,19 @@ from demtrack.core.tracking.types import Track, TrackPoint
 
 from .site_info import sea_level_geoid
 
+if TYPE_CHECKING:
+    from demtrack.core.site.folder import Site
+
 __all__ = [
     "EXPORT_TYPES",
+    "SUFFIXES",
+    "check_track_suffix",
     "export_bytes",
     "parse_epoch",
     "site_heights",
     "time_base",
     "track_from_body",
+    "write_track_file",
 ]
 
 #: Export format -> (media type, file suffix).
@@ -136,3 +144,38 @@ def export_bytes(
     else:
         times = time_base(epoch, t_s=[p["t_s"] for b in bodies for p in b["points"]])
     return track_file_bytes(fmt, tracks, to_geodetic, times=times, heights=heights)
+
+
+SUFFIXES = (".geojson", ".json", ".csv", ".gpx", ".kml", ".kmz", ".gpkg")
+
+
+def check_track_suffix(out: Path) -> str:
+    """The track file's lower-case suffix; an unknown one is an :class:`InputFileError`."""
+    suffix = out.suffix.lower()
+    if suffix not in SUFFIXES:
+        raise InputFileError(f"unknown track file type {suffix!r} (use {', '.join(SUFFIXES)})")
+    return suffix
+
+
+def write_track_file(
+    site: Site, tracks: Sequence[Track], out: Path, epoch: datetime | None = None
+) -> None:
+    """Write ``tracks`` in the format of ``out``'s suffix (and a ``.csvt`` beside a CSV)."""
+    from demtrack.core.io.track_io import TRACK_CSVT, TimeBase, write_tracks
+
+    suffix = check_track_suffix(out)
+    frame = site.frame
+
+    def to_geodetic(e: float, n: float, u: float) -> tuple[float, float, float]:
+        lat, lon, h = frame.to_geodetic(e, n, u)
+        return float(lat), float(lon), float(h)
+
+    fmt = "geojson" if suffix == ".json" else suffix[1:]
+    # Real UTC when the times are UNIX seconds; session seconds (a declared --epoch, or
+    # all before 2000) are said to be relative in the file.
+    times = TimeBase.for_times([p.t_s for t in tracks for p in t.points], epoch)
+    heights = site_heights(site)  # the server's rule: EGM96, else the site's N, else none
+    write_tracks(fmt, out, tracks, to_geodetic, times=times, heights=heights)
+    if fmt == "csv":
+        # GDAL's column types for the CSV, beside it (ogr reads x.csvt with x.csv).
+        out.with_suffix(".csvt").write_text(TRACK_CSVT, encoding="utf-8")

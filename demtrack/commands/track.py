@@ -35,14 +35,11 @@ if TYPE_CHECKING:
 
 __all__ = [
     "DEFAULT_METHOD",
-    "check_track_suffix",
     "register",
     "track_detections",
-    "write_track_file",
 ]
 
 UNIX_EPOCH_DT = datetime(1970, 1, 1, tzinfo=UTC)
-SUFFIXES = (".geojson", ".json", ".csv", ".gpx", ".kml", ".kmz", ".gpkg")
 
 
 def _epoch(text: str | None) -> datetime | None:
@@ -110,41 +107,10 @@ def _with_estimated_latency(
     return replace(site, sensors=sensors)
 
 
-def check_track_suffix(out: Path) -> str:
-    """The track file's lower-case suffix; an unknown one is an :class:`InputFileError`."""
-    suffix = out.suffix.lower()
-    if suffix not in SUFFIXES:
-        raise InputFileError(f"unknown track file type {suffix!r} (use {', '.join(SUFFIXES)})")
-    return suffix
-
-
-def write_track_file(
-    site: Site, tracks: Sequence[Track], out: Path, epoch: datetime | None = None
-) -> None:
-    """Write ``tracks`` in the format of ``out``'s suffix (and a ``.csvt`` beside a CSV)."""
-    from demtrack.core.io.track_io import TRACK_CSVT, TimeBase, write_tracks
-    from demtrack.server.track_export import site_heights
-
-    suffix = check_track_suffix(out)
-    frame = site.frame
-
-    def to_geodetic(e: float, n: float, u: float) -> tuple[float, float, float]:
-        lat, lon, h = frame.to_geodetic(e, n, u)
-        return float(lat), float(lon), float(h)
-
-    fmt = "geojson" if suffix == ".json" else suffix[1:]
-    # Real UTC when the times are UNIX seconds; session seconds (a declared --epoch, or
-    # all before 2000) are said to be relative in the file.
-    times = TimeBase.for_times([p.t_s for t in tracks for p in t.points], epoch)
-    heights = site_heights(site)  # the server's rule: EGM96, else the site's N, else none
-    write_tracks(fmt, out, tracks, to_geodetic, times=times, heights=heights)
-    if fmt == "csv":
-        # GDAL's column types for the CSV, beside it (ogr reads x.csvt with x.csv).
-        out.with_suffix(".csvt").write_text(TRACK_CSVT, encoding="utf-8")
-
-
 def _run(args: argparse.Namespace) -> int:
     out = Path(args.output)
+    from demtrack.server.track_export import check_track_suffix, write_track_file
+
     check_track_suffix(out)
     epoch = _epoch(args.epoch)
     from demtrack.core.site.folder import load_site

@@ -106,7 +106,7 @@ def reprocess(
     """Reprocess ``archive`` on the site into ``out_dir``; returns the manifest.
 
     ``write_tracks(tracks, path)`` writes the tracks file (the CLI passes
-    ``demtrack track``'s writer, :func:`demtrack.commands.track.write_track_file`).
+    ``demtrack track``'s writer, :func:`demtrack.server.track_export.write_track_file`).
     """
     site_dir = os.fspath(site_dir)
     t0 = time.perf_counter()

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from demtrack.commands.track import write_track_file
 from demtrack.reprocess.run import ReprocessSettings, reprocess
 from demtrack.reprocess.tasks import site_at
+from demtrack.server.track_export import write_track_file
 
 
 @pytest.fixture(scope="session")
