@@ -172,6 +172,7 @@ def _serve_demo(
     overrides: dict[str, Any] = {
         "site": site_dir,
         "db_path": db,
+        "database_url": None,  # the demo's store is its fresh file, whatever the environment
         "scene3d": not args.no_3d,
         **live,
     }

@@ -220,7 +220,7 @@ def _no_postgis_url(cluster) -> str:
     return f"postgresql://plain:hunter2@127.0.0.1:{cluster.port}/{name}"
 
 
-@pytest.mark.parametrize("case", ["unreachable", "malformed", "no_postgis"])
+@pytest.mark.parametrize("case", ["unreachable", "malformed", "no_postgis", "not_postgres"])
 def test_a_database_that_cannot_be_used_is_one_line(
     case, sample_site_dir, tmp_path, postgres_cluster
 ):
@@ -228,12 +228,16 @@ def test_a_database_that_cannot_be_used_is_one_line(
         "unreachable": "postgresql://u:hunter2@127.0.0.1:1/db",
         "malformed": "postgresql://u:hunter2@127.0.0.1:notaport/db",
         "no_postgis": None,
+        "not_postgres": "mysql://u:hunter2@127.0.0.1/db",
     }[case] or _no_postgis_url(postgres_cluster)
     proc = _serve(sample_site_dir, tmp_path, url)
     err = proc.stderr
     assert proc.returncode == 2, err[-3000:]
     assert err.count("\n") == 1 and err.startswith("demtrack "), err[-3000:]
     assert "Traceback" not in err and "hunter2" not in err + proc.stdout, err
+    if case == "not_postgres":
+        assert "must be a postgresql:// URL" in err, err
+        return
     assert "postgresql://" in err and ("***" in err), err
     if case == "no_postgis":
         assert "postgis" in err.lower(), err

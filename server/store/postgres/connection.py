@@ -60,9 +60,9 @@ def _pg(sql: str) -> str:
 class QmarkConnection:
     """A psycopg connection that takes ``?`` placeholders (the store's shared SQL).
 
-    ``execute`` returns the psycopg cursor (``fetchone``, ``fetchall``, iteration; not
-    ``rowcount``, which the store's pipelined writes do not have yet: the shared SQL reads
-    ``RETURNING`` rows instead); ``raw`` is the connection itself.
+    ``execute`` returns the psycopg cursor (``fetchone``, ``fetchall``, iteration; the
+    shared SQL reads ``RETURNING`` rows rather than ``rowcount``, whose meaning differs
+    between the drivers); ``raw`` is the connection itself.
     """
 
     def __init__(self, raw: psycopg.Connection[Any]) -> None:
