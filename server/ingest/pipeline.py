@@ -263,7 +263,8 @@ class Pipeline:
                 return self._catch_up(None)
         return self._catch_up(below)
 
-    def _catch_up(self, below: int | None) -> int:
+    def _catch_up(self, below: int | None, counted: set[int] | frozenset[int] = frozenset()) -> int:
+        """:meth:`catch_up` with the lock held; ``counted``: ids already counted per sensor."""
         n = 0
         while self.tracking and self.tail_after is not None:
             rows = self.store.detections(self.tail_after, CATCH_UP_CHUNK, unprocessed=True)
@@ -272,7 +273,9 @@ class Pipeline:
             if not rows:
                 break
             self.tail_after = rows[-1][0]
-            for _, d in rows:  # counted here as this process counts its own batches
+            for i, d in rows:  # counted here as this process counts its own batches
+                if i in counted:
+                    continue
                 self._last_t[d.sensor] = max(d.t_s, self._last_t.get(d.sensor, d.t_s))
                 self._n_det[d.sensor] = self._n_det.get(d.sensor, 0) + 1
             self._process(rows)
@@ -448,10 +451,15 @@ class Pipeline:
             return
         acks = [a for a in acks if a[0].get("kind") != "poses"]
         try:
-            if self.tail_after is not None:  # others' batches stored before this one first
-                if pending:
-                    self._catch_up(below=pending[0][0])
-                    self.tail_after = max(self.tail_after, pending[-1][0])
+            if self.tail_after is not None and pending:  # others' stored before, first
+                if pending[-1][0] - pending[0][0] + 1 != len(pending):
+                    # committed one by one (a batch failed the shared transaction): other
+                    # processes' batches may lie between; all of them in id order, from
+                    # the store (this group's ingest messages are not sent)
+                    self._catch_up(None, counted={i for i, _ in pending})
+                    return
+                self._catch_up(below=pending[0][0])
+                self.tail_after = max(self.tail_after, pending[-1][0])
             self._process(pending, acks=acks, posed=posed)
         except StoreUnavailableError as exc:  # durable batches; start-up replays them
             log.error("processing after commit stopped: %s", exc)
