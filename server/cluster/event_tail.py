@@ -29,6 +29,8 @@ __all__ = ["CHANNEL", "EventTail"]
 log = logging.getLogger("demtrack.server")
 
 _PAGE = 1000
+#: Longest single wait for a notification (s): how soon :meth:`EventTail.stop` is seen.
+_SLICE_S = 0.5
 
 
 class EventTail:
@@ -86,21 +88,26 @@ class EventTail:
         return self
 
     def stop(self) -> None:
-        """Stop the thread (within ``poll_s``) and close its connection."""
+        """Stop the thread (within half a second) and close its connection."""
         self._stop.set()
         if self._thread is not None:
-            self._thread.join(timeout=self.poll_s + 5.0)
+            self._thread.join(timeout=10.0)
 
     def _run(self, conn: Any) -> None:
+        due = 0.0  # the next read without a notification (monotonic s)
         try:
             while not self._stop.is_set():
-                try:
-                    self.drain()
-                except Exception:  # noqa: BLE001 - a thread: log, keep following
-                    log.exception("reading the event log failed")
-                wait = self.poll_s if self._gap_since is None else min(self.poll_s, 0.05)
-                for _ in conn.notifies(timeout=wait, stop_after=1):
-                    pass
+                now = time.monotonic()
+                if now >= due or self._gap_since is not None:
+                    try:
+                        self.drain()
+                    except Exception:  # noqa: BLE001 - a thread: log, keep following
+                        log.exception("reading the event log failed")
+                    due = time.monotonic() + self.poll_s
+                # short waits, so stop() is seen soon; a notification ends one at once
+                wait = 0.05 if self._gap_since is not None else min(_SLICE_S, self.poll_s)
+                if any(True for _ in conn.notifies(timeout=wait, stop_after=1)):
+                    due = 0.0
         except Exception:  # noqa: BLE001 - the connection failed: say so once
             if not self._stop.is_set():
                 log.exception("event log listener stopped")

@@ -102,6 +102,11 @@ class ClusterRole:
             t = threading.Thread(target=target, name=f"demtrack-{name}", daemon=True)
             t.start()
             self._threads.append(t)
+        if token is None:
+            log.warning(
+                "site %s is tracked by another process; this one stores, serves and stands by",
+                self.site_id,
+            )
         counts = self._lead(token) if token is not None else None
         return counts or {"replayed": 0, "processed": 0}
 
@@ -123,7 +128,7 @@ class ClusterRole:
     def _lead(self, token: int) -> dict[str, int] | None:
         """Track with ``token``: the start-up replay, then live. None if it was lost."""
         fence = SiteLease.fence_check(self.site_id, token, on_stale=lambda: self._lose(token))
-        log.info("site %s: this process tracks it now (lease token %d)", self.site_id, token)
+        log.warning("site %s: this process tracks it now (lease token %d)", self.site_id, token)
         try:
             counts = self.pipeline.lead(fence)
         except StoreUnavailableError as exc:  # fenced out (or no store) while replaying

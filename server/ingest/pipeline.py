@@ -144,22 +144,14 @@ class Pipeline:
             zones = tuple(read_zones_geojson(zones_path, site.frame))
             events = LiveEventParams(**{**events.__dict__, "zones": zones})
         self.event_params = events
-        self.live_events: LiveEvents | None = None
         self.commits = GroupCommit()
-        self.buffer = ReorderBuffer(self.reorder_lag_s)
-        self.feed = TrackerFeed(build_tracker(method, roads=site.roads), self.buffer)
-        self.bodies = TrackBodies(site.frame)
         #: Ingest transactions committed and the batches they held (group commit).
         self.n_commits = 0
         self.n_batches = 0
-        #: Fixes stored with ``tracked: false`` (they sorted before what was tracked).
-        self.n_late = 0
         self._last_t: dict[str, float] = {}
         self._n_det: dict[str, int] = {}
-        #: Pose telemetry: checked samples, rolling series, deferred detections.
-        self.pose_book = PoseBook(site)
-        #: ``sensor_pose`` messages, rate-limited per sensor.
-        self.announcer = PoseAnnouncer(pose_interval_s)
+        self._pose_interval_s = float(pose_interval_s)
+        self._fresh_tracking()
         self._flush_timer: threading.Timer | None = None
         self._inline: dict[str, Any] | None = None
         self._closed = False
@@ -238,32 +230,41 @@ class Pipeline:
         """
         with self._lock:
             self.tracking = False
-            self.buffer = ReorderBuffer(self.reorder_lag_s)
-            self.feed = TrackerFeed(build_tracker(self.method, roads=self.site.roads), self.buffer)
-            self.bodies = TrackBodies(self.site.frame)
-            self.pose_book = PoseBook(self.site)
-            self.announcer = PoseAnnouncer(self.announcer.interval_s)
-            self.live_events = None
-            self.n_late = 0
+            self._fresh_tracking()
             self.fence = fence
             self.tail_after = 0
             counts = self._start()
             self.tracking = True
             return counts
 
-    def catch_up(self, below: int | None = None) -> int:
+    def _fresh_tracking(self) -> None:
+        """The tracker, its reorder buffer, track bodies, pose book and events, all new."""
+        self.buffer = ReorderBuffer(self.reorder_lag_s)
+        self.feed = TrackerFeed(build_tracker(self.method, roads=self.site.roads), self.buffer)
+        self.bodies = TrackBodies(self.site.frame)
+        self.live_events: LiveEvents | None = None
+        #: Fixes stored with ``tracked: false`` (they sorted before what was tracked).
+        self.n_late = 0
+        #: Pose telemetry: checked samples, rolling series, deferred detections.
+        self.pose_book = PoseBook(self.site)
+        #: ``sensor_pose`` messages, rate-limited per sensor.
+        self.announcer = PoseAnnouncer(self._pose_interval_s)
+
+    def catch_up(self) -> int:
         """Track the batches other processes stored since :attr:`tail_after`, by id.
 
-        ``below``: only detection ids under it (the lock is then held by the caller,
-        who is about to process its own batch, whose first id it is). Returns the number
-        of detections processed. A no-op unless this process tracks in a cluster.
+        Returns the number of detections processed. A no-op unless this process tracks
+        in a cluster.
         """
-        if below is None:
-            with self._lock:
-                return self._catch_up(None)
-        return self._catch_up(below)
+        with self._lock:
+            return self._catch_up(None)
 
-    def _catch_up(self, below: int | None) -> int:
+    def _catch_up(self, below: int | None, counted: set[int] | frozenset[int] = frozenset()) -> int:
+        """:meth:`catch_up` with the lock held.
+
+        ``below``: only detection ids under it (the first id of the caller's own batch,
+        processed next). ``counted``: ids already counted per sensor (this process's own).
+        """
         n = 0
         while self.tracking and self.tail_after is not None:
             rows = self.store.detections(self.tail_after, CATCH_UP_CHUNK, unprocessed=True)
@@ -272,7 +273,9 @@ class Pipeline:
             if not rows:
                 break
             self.tail_after = rows[-1][0]
-            for _, d in rows:  # counted here as this process counts its own batches
+            for i, d in rows:  # counted here as this process counts its own batches
+                if i in counted:
+                    continue
                 self._last_t[d.sensor] = max(d.t_s, self._last_t.get(d.sensor, d.t_s))
                 self._n_det[d.sensor] = self._n_det.get(d.sensor, 0) + 1
             self._process(rows)
@@ -448,10 +451,15 @@ class Pipeline:
             return
         acks = [a for a in acks if a[0].get("kind") != "poses"]
         try:
-            if self.tail_after is not None:  # others' batches stored before this one first
-                if pending:
-                    self._catch_up(below=pending[0][0])
-                    self.tail_after = max(self.tail_after, pending[-1][0])
+            if self.tail_after is not None and pending:  # others' stored before, first
+                if pending[-1][0] - pending[0][0] + 1 != len(pending):
+                    # committed one by one (a batch failed the shared transaction): other
+                    # processes' batches may lie between; all of them in id order, from
+                    # the store (this group's ingest messages are not sent)
+                    self._catch_up(None, counted={i for i, _ in pending})
+                    return
+                self._catch_up(below=pending[0][0])
+                self.tail_after = max(self.tail_after, pending[-1][0])
             self._process(pending, acks=acks, posed=posed)
         except StoreUnavailableError as exc:  # durable batches; start-up replays them
             log.error("processing after commit stopped: %s", exc)

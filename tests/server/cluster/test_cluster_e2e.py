@@ -109,6 +109,7 @@ def test_two_processes_track_each_target_once_and_stream_everything(
     try:
         assert f":{leader.pid}:" in _holder(postgres_url)  # the first process took the lease
         follower, b = serve_on(sample_site_dir, tmp_path, "b", postgres_url, TTL_S)
+        assert "tracked by another process" in log_text(tmp_path, "b")
         console = _Listener(b)  # a console on the follower
         for k, batch in enumerate(batches):  # batches alternate between the processes
             ack = post_batch(a if k % 2 == 0 else b, batch)
@@ -145,6 +146,7 @@ def test_follower_takes_over_after_the_leader_is_killed(
             post_batch(b, batch)
         wait_tracked(postgres_url)
         assert f":{follower.pid}:" in _holder(postgres_url)
+        assert "this process tracks it now (lease token 2)" in log_text(tmp_path, "b")
         assert get_json(b, "/api/tracks") == reference
         stored = stream_rows(postgres_url)
         _same_stream(console.wait_for(stored[-1][0]), stored)
@@ -182,6 +184,7 @@ def test_a_paused_leader_is_fenced_out_when_it_resumes(
         assert get_json(a, "/api/tracks") == reference
         assert get_json(b, "/api/tracks") == reference
         assert "stops tracking" in log_text(tmp_path, "a")
+        assert "this process tracks it now (lease token 2)" in log_text(tmp_path, "b")
         assert "stops tracking" not in log_text(tmp_path, "b")
     finally:
         stop(leader)

@@ -125,3 +125,42 @@ def test_sqlite_pipeline_is_untouched_by_the_cluster_hooks(site, tmp_path: Path,
     assert p.catch_up() == 0
     p.ingest(batches[0])
     assert len(p.store.fixes(0, 10_000)) == len(batches[0])
+
+
+def test_a_group_committed_one_by_one_leaves_no_batch_of_another_process_behind(
+    site, postgres_url: str, batches
+) -> None:
+    """A group whose shared transaction failed is committed batch by batch; another
+    process's batch committed between two of them is still tracked, in id order."""
+    from demtrack.server.ingest.group_commit import Request
+
+    lease = SiteLease(postgres_url)
+    leader, follower = _pipeline(site, postgres_url), _pipeline(site, postgres_url)
+    token = lease.acquire("s", "leader", 60)
+    assert token is not None
+    leader.lead(SiteLease.fence_check("s", token))
+    follower.follow()
+    store = leader.store
+    insert = store.insert_batches
+    calls: list[int] = []
+
+    def flaky(entries):  # the group's shared transaction fails; between retries, another
+        calls.append(len(entries))  # process commits a batch
+        if len(calls) == 1:
+            raise RuntimeError("the shared transaction failed")
+        out = insert(entries)
+        if len(calls) == 2:
+            follower.ingest(batches[1])
+        return out
+
+    store.insert_batches = flaky  # type: ignore[method-assign]
+    with leader._lock:  # noqa: SLF001 - the group commit's own call, made by hand
+        leader._ingest_group([Request(batches[0], None), Request(batches[2], None)])  # noqa: SLF001
+    store.insert_batches = insert  # type: ignore[method-assign]
+    assert calls == [2, 1, 1]
+    n = sum(len(b) for b in batches[:3])
+    assert _n_fixes(postgres_url) == n  # the follower's batch between them too
+    with psycopg.connect(postgres_url, autocommit=True) as c:
+        ids = [r[0] for r in c.execute("SELECT id FROM detections ORDER BY id")]
+    assert ids == list(range(1, n + 1))
+    lease.close()
