@@ -75,11 +75,15 @@ def scenario_records(site_dir: Path, n: int) -> list[dict[str, Any]]:
     return out
 
 
-def _start_server(site: Path, db: Path) -> tuple[subprocess.Popen, str]:
+def _start_server(
+    site: Path, db: Path, database_url: str | None = None
+) -> tuple[subprocess.Popen, str]:
     env = {**os.environ, "DEMTRACK_TOKEN": _TOKEN}
+    env.pop("DEMTRACK_DATABASE_URL", None)  # the store is the one this run names
+    more = [] if database_url is None else ["--database-url", database_url]
     proc = subprocess.Popen(
         [sys.executable, "-m", "demtrack.cli", "serve", "--site", str(site), "--db", str(db)]
-        + ["--port", "0", "--log-level", "info"],
+        + ["--port", "0", "--log-level", "info", *more],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
@@ -158,15 +162,17 @@ def _ingest(url: str, batches: list[list[dict[str, Any]]]) -> tuple[float, int]:
         return time.perf_counter() - t0, accepted
 
 
-def _durable_only(site_dir: Path, batches: list[list[dict[str, Any]]]) -> float:
+def _durable_only(
+    site_dir: Path, batches: list[list[dict[str, Any]]], database_url: str | None = None
+) -> float:
     """Validation and committed inserts alone, in-process (detections/s)."""
     from demtrack.core.site.folder import load_site
     from demtrack.server.ingest.pipeline import Pipeline
-    from demtrack.server.store.database import Store
+    from demtrack.server.store.opening import open_store
 
     site = load_site(site_dir)
     with tempfile.TemporaryDirectory() as tmp:
-        store = Store(Path(tmp) / "d.sqlite3")
+        store = open_store(database_url or Path(tmp) / "d.sqlite3")
         p = Pipeline(site, store, "kalman", lambda _m: None)
         n, t0 = 0, time.perf_counter()
         for b in batches:
@@ -235,6 +241,67 @@ async def _fan_out(
     return lat, np.array(acks)
 
 
+def _measure(
+    site: Path,
+    tmp: Path,
+    batches: list[list[dict[str, Any]]],
+    frames: list[list[list[dict[str, Any]]]],
+    pg: Any = None,
+    fan_out: Any = None,
+) -> dict[str, Any]:
+    """The ingest figures on one store: SQLite, or fresh PostgreSQL databases.
+
+    ``pg``: None for SQLite, else a factory of context managers each giving a new
+    database URL; ``fan_out(url)``, when given, measures the fan-out on the same server.
+    """
+    with contextlib.ExitStack() as stack:
+        durable_url = None if pg is None else stack.enter_context(pg())
+        server_url = None if pg is None else stack.enter_context(pg())
+        out: dict[str, Any] = {"durable": _durable_only(site, batches, durable_url)}
+        name = "sqlite" if pg is None else "postgres"
+        proc, url = _start_server(site, tmp / f"bench-{name}.sqlite3", server_url)
+        try:
+            out["wall"], out["accepted"] = _ingest(url, batches)
+            before = _status_counts(url)
+            out["f_wall"], out["f_accepted"], out["f_posts"] = _ingest_frames(url, frames)
+            after = _status_counts(url)
+            out["late"] = after["late_fixes"]
+            out["f_commits"] = after["ingest_commits"] - before["ingest_commits"]
+            out["fan_out"] = None if fan_out is None else fan_out(url)
+        finally:
+            proc.kill()
+            proc.wait(10)
+    out["rate"] = out["accepted"] / out["wall"]
+    out["f_rate"] = out["f_accepted"] / out["f_wall"]
+    return out
+
+
+def _print_ingest(m: dict[str, Any], label: str) -> None:
+    print(
+        f"  [{label}] ingest, durable + geolocated + tracked + events (HTTP): {m['rate']:8.0f}"
+        f" det/s ({m['accepted']} in {m['wall']:.1f} s; target {_TARGET_RATE:.0f}:"
+        f" {m['rate'] / _TARGET_RATE:.2f} x)"
+    )
+    print(
+        f"  [{label}] the same, per-camera 10 Hz frame batches (cameras at once):"
+        f" {m['f_rate']:8.0f} det/s ({m['f_accepted']} in {m['f_wall']:.1f} s, {m['f_posts']}"
+        f" POSTs of {m['f_accepted'] / m['f_posts']:.1f} detections in {m['f_commits']} group"
+        f" commits; target: {m['f_rate'] / _TARGET_RATE:.2f} x)"
+    )
+    print(f"  [{label}] late fixes (stored, not tracked): {m['late']}")
+    print(
+        f"  [{label}] durable storage only (validate + committed insert): {m['durable']:8.0f} det/s"
+    )
+
+
+def _postgres(args: argparse.Namespace, stack: contextlib.ExitStack, tmp: Path) -> Any:
+    """A factory of fresh database URLs on ``--database-url``'s server or a temporary one."""
+    from .pg_temp import fresh_database, temp_server
+
+    server = args.database_url or stack.enter_context(temp_server(tmp / "pg"))
+    return lambda: fresh_database(server)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark and print the figures; returns the exit status."""
     p = argparse.ArgumentParser(prog="demtrack bench server", description=__doc__.split("\n")[0])
@@ -244,45 +311,48 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--clients", type=int, default=50, help="WebSocket clients")
     p.add_argument("--messages", type=int, default=200, help="batches timed for fan-out")
     p.add_argument("--rate", type=float, default=20.0, help="fan-out batches per second")
+    p.add_argument(
+        "--database-url",
+        metavar="URL",
+        help="also run the ingest on PostgreSQL, in fresh databases made on this server (its"
+        " role needs CREATEDB), and print the PostgreSQL/SQLite ratios",
+    )
+    p.add_argument(
+        "--postgres",
+        action="store_true",
+        help="as --database-url, on a throw-away PostgreSQL server of its own",
+    )
     args = p.parse_args(argv)
-    with tempfile.TemporaryDirectory() as tmp:
-        site = site_or_sample(args.site, Path(tmp), announce=True)
+    with tempfile.TemporaryDirectory() as tmp_name, contextlib.ExitStack() as stack:
+        tmp = Path(tmp_name)
+        site = site_or_sample(args.site, tmp, announce=True)
         both = scenario_records(site, 2 * args.detections)
         recs, later = both[: args.detections], both[args.detections :]
         batches = [recs[i : i + args.batch] for i in range(0, len(recs), args.batch)]
         frames = frame_batches(later)
-        durable = _durable_only(site, batches)
-        proc, url = _start_server(site, Path(tmp) / "bench.sqlite3")
-        try:
-            wall, accepted = _ingest(url, batches)
-            rate = accepted / wall
-            before = _status_counts(url)
-            f_wall, f_accepted, f_posts = _ingest_frames(url, frames)
-            f_rate = f_accepted / f_wall
-            after = _status_counts(url)
-            late = after["late_fixes"]
-            f_commits = after["ingest_commits"] - before["ingest_commits"]
-            last = later[-1]
-            record = {k: last[k] for k in ("sensor", "bbox", "class")}
-            lat, acks = asyncio.run(
+        last = later[-1]
+        record = {k: last[k] for k in ("sensor", "bbox", "class")}
+
+        def fan_out(url: str) -> tuple[np.ndarray, np.ndarray]:
+            return asyncio.run(
                 _fan_out(url, args.clients, args.messages, args.rate, last["t"] + 60.0, record)
             )
-        finally:
-            proc.kill()
-            proc.wait(10)
+
+        lite = _measure(site, tmp, batches, frames, fan_out=fan_out)
+        pg = None
+        if args.database_url or args.postgres:
+            pg = _measure(site, tmp, batches, frames, _postgres(args, stack, tmp))
+    lat, acks = lite["fan_out"]
     cpus = os.cpu_count()
     print(f"demtrack bench server: {len(recs)} detections in batches of {args.batch}, {cpus} CPUs")
-    print(
-        f"  ingest, durable + geolocated + tracked + events (HTTP): {rate:8.0f} det/s"
-        f" ({accepted} in {wall:.1f} s; target {_TARGET_RATE:.0f}: {rate / _TARGET_RATE:.2f} x)"
-    )
-    print(
-        f"  the same, per-camera 10 Hz frame batches (cameras at once): {f_rate:8.0f} det/s"
-        f" ({f_accepted} in {f_wall:.1f} s, {f_posts} POSTs of {f_accepted / f_posts:.1f}"
-        f" detections in {f_commits} group commits; target: {f_rate / _TARGET_RATE:.2f} x)"
-    )
-    print(f"  late fixes (stored, not tracked): {late}")
-    print(f"  durable storage only (validate + committed insert):  {durable:8.0f} det/s")
+    _print_ingest(lite, "sqlite")
+    if pg is not None:
+        _print_ingest(pg, "postgres")
+        print(
+            "  PostgreSQL / SQLite, same run, same input: gateway batches"
+            f" {pg['rate'] / lite['rate']:.2f}, frame batches {pg['f_rate'] / lite['f_rate']:.2f},"
+            f" durable storage only {pg['durable'] / lite['durable']:.2f} (bar: at least 0.5)"
+        )
     if len(lat):
         med, p95 = (1000 * float(np.percentile(lat, q)) for q in (50, 95))
         amed, ap95 = (1000 * float(np.percentile(acks, q)) for q in (50, 95))

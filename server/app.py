@@ -51,6 +51,7 @@ from .api import (
 )
 from .api.deps import READER
 from .api.errors import error_responses, install_error_handlers
+from .cluster.node import start_node
 from .cot.service import start_cot_sender
 from .heads.service import check_heads, start_heads
 from .hub import Hub
@@ -60,8 +61,9 @@ from .scenario_source import ScenarioSource
 from .security import RequestGate, install_log_redaction, resolve_token
 from .settings import Settings
 from .state import ConsoleState
-from .store.database import Store
+from .store.backend import StoreBackend
 from .store.markers import list_markers
+from .store.opening import open_store
 from .stream import endpoint as stream
 from .video.frames_http import frame_book
 from .video.service import check_video_source, start_video_replay
@@ -133,6 +135,10 @@ def _fan_out(publishers: list[Publisher]) -> Publisher:
     return publish
 
 
+def _publish_nothing(messages: list[dict[str, Any]]) -> None:
+    """The pipeline's publisher on PostgreSQL: the event log's follower publishes."""
+
+
 def _start_scene(site_: Site, settings: Settings) -> Any:
     from .scene3d import Scene3D
 
@@ -143,7 +149,7 @@ def _start_scene(site_: Site, settings: Settings) -> Any:
 
 def _start_replay(
     site_: Site,
-    store: Store,
+    store: StoreBackend,
     pipeline: Pipeline,
     settings: Settings,
     scenarios: ScenarioSource,
@@ -204,13 +210,19 @@ def check_startup(app: FastAPI) -> None:
     SiteError
         The site folder, a file it names (DEM, roads, images) or the database cannot be
         used; the message names the file and the problem.
+    SettingsError
+        The PostgreSQL database of ``database_url`` cannot be used (its URL is named
+        without the password).
     """
     settings: Settings = app.state.settings
     app.state.preloaded_site = load_site(settings.site)
     check_heads(app.state.preloaded_site, settings)  # a bad head_adapter entry: one line
+    if settings.database_url is not None:  # PostgreSQL: open_store words its own errors
+        open_store(settings).close()
+        return
     path = settings.resolved_db_path
     try:
-        Store(path).close()
+        open_store(path).close()
     except sqlite3.DatabaseError as exc:
         raise SiteError(f"database {path} cannot be used: {exc}") from None
     except RuntimeError as exc:  # a newer schema
@@ -236,7 +248,7 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     site_ = (
         preloaded if preloaded is not None else await run_in_threadpool(load_site, settings.site)
     )
-    store = Store(settings.resolved_db_path)
+    store = open_store(settings)
     hub = Hub(settings.ws_queue_size)
     hub.bind(asyncio.get_running_loop())
     scene = await run_in_threadpool(_start_scene, site_, settings) if settings.scene3d else None
@@ -260,11 +272,30 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
         subscribers.append(cot.publish)
         log.info("sending CoT to %s", settings.cot_url)
     app.state.cot = cot
+    # On PostgreSQL several processes share the database: the stream is published from
+    # the event log, whoever wrote it (demtrack.server.cluster), never by the pipeline.
+    shared = getattr(store, "kind", "sqlite") == "postgres"
     pipeline = Pipeline(
-        site_, store, settings.tracker_method, _fan_out(subscribers), **pipeline_options(settings)
+        site_,
+        store,
+        settings.tracker_method,
+        _publish_nothing if shared else _fan_out(subscribers),
+        **pipeline_options(settings),
     )
     caster = await run_in_threadpool(site_.dem.ray_caster)
-    counts = await run_in_threadpool(pipeline.start)
+    app.state.cluster = None
+    if shared:
+        app.state.cluster = await run_in_threadpool(
+            start_node,
+            store.url,  # type: ignore[attr-defined]
+            pipeline,
+            site_.name,
+            settings.lease_ttl_s,
+            _fan_out(subscribers),
+        )
+        counts = app.state.cluster.counts
+    else:
+        counts = await run_in_threadpool(pipeline.start)
     hub.last_seq = store.last_seq()
     app.state.schema_version = store.schema_version()  # /api/health reads no database
     log.info("replayed %(replayed)d fixes, processed %(processed)d detections", counts)
@@ -297,6 +328,8 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
             await run_in_threadpool(app.state.replay.stop)
         if app.state.heads is not None:  # it feeds poses into the store
             await run_in_threadpool(app.state.heads.stop)
+        if app.state.cluster is not None:  # hands the lease over before the store closes
+            await run_in_threadpool(app.state.cluster.stop)
         await run_in_threadpool(pipeline.close)  # its pose-message timer writes too
         if scene is not None:
             await run_in_threadpool(scene.stop)

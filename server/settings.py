@@ -30,6 +30,10 @@ class Settings(BaseSettings):
         The site folder (``site.json`` inside).
     db_path : Path or None
         SQLite file; default ``<site>/console.sqlite3`` (next to the site's files).
+    database_url : str or None
+        ``postgresql://user[:password]@host[:port]/database`` (``DEMTRACK_DATABASE_URL``):
+        keep the store on that PostgreSQL + PostGIS server instead of the SQLite file (see
+        docs/postgres.md); unset (the default): SQLite, ``db_path``.
     token : SecretStr or None
         Operator token. When unset, one is generated on first start, stored in
         ``<db_path>.token`` (mode 0600) and reused on later starts.
@@ -146,6 +150,10 @@ class Settings(BaseSettings):
     replay_frame_hz : float
         Video replay: most frames per second (wall clock) put in the frame book per camera;
         at higher replay speeds the panel skips frames, the detector does not.
+    lease_ttl_s : float
+        On PostgreSQL with several server processes: how long the tracker's site lease
+        lasts unless renewed (renewed every third of it); a process that dies is
+        replaced as the site's tracker this long after (:mod:`demtrack.server.cluster`).
     """
 
     model_config = SettingsConfigDict(
@@ -154,6 +162,7 @@ class Settings(BaseSettings):
 
     site: Path
     db_path: Path | None = None
+    database_url: str | None = None
     token: SecretStr | None = None
     open_reads: bool = False
     cors_origins: list[str] = Field(default_factory=list)
@@ -203,6 +212,7 @@ class Settings(BaseSettings):
     max_frame_bytes: int = Field(default=2 * 1024 * 1024, gt=0)
     replay_video: bool = False
     replay_frame_hz: float = Field(default=5.0, gt=0, le=30, allow_inf_nan=False)
+    lease_ttl_s: float = Field(default=5.0, ge=0.5, le=600, allow_inf_nan=False)
 
     @field_validator("replay_start_s", mode="before")
     @classmethod
@@ -233,6 +243,25 @@ class Settings(BaseSettings):
         except ValueError as exc:  # SettingsError is a ValueError: pydantic reports it
             raise ValueError(str(exc)) from None
         return value.strip()
+
+    @field_validator("database_url")
+    @classmethod
+    def _check_database_url(cls, value: str | None) -> str | None:
+        """A ``postgresql://`` URL, or None (blank is None: SQLite)."""
+        if value is None or not value.strip():
+            return None
+        if value.strip().split("://", 1)[0].lower() not in ("postgresql", "postgres"):
+            raise ValueError("database_url must be a postgresql:// URL")
+        return value.strip()
+
+    @property
+    def database_label(self) -> str:
+        """The store as it may be printed: the SQLite file, or the URL without a password."""
+        if self.database_url is None:
+            return str(self.resolved_db_path)
+        from .store.postgres.connection import safe_url
+
+        return safe_url(self.database_url)
 
     @property
     def resolved_db_path(self) -> Path:

@@ -16,7 +16,7 @@ from .hub import Hub
 from .ingest.pipeline import Pipeline
 from .ingest.poses import PoseIngest
 from .settings import Settings
-from .store.database import Store
+from .store.backend import StoreBackend
 
 __all__ = ["ConsoleState"]
 
@@ -27,7 +27,7 @@ class ConsoleState:
 
     settings: Settings
     site: Site
-    store: Store
+    store: StoreBackend
     hub: Hub
     pipeline: Pipeline
     caster: RayCaster

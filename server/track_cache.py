@@ -28,8 +28,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from .store.backend import StoreBackend
 from .store.codec import loads_json
-from .store.database import Store
 from .store.queries import TrackTail
 
 __all__ = ["DEFAULT_MAX_BYTES", "CachedTrack", "TrackCache", "clip"]
@@ -157,7 +157,7 @@ class TrackCache:
 
     Parameters
     ----------
-    store : Store
+    store : StoreBackend
         Where the bodies live.
     max_bytes : int
         Budget in bytes of stored JSON text. A window larger than the budget is still
@@ -168,7 +168,7 @@ class TrackCache:
     Thread-safe: the index is guarded by a lock; bodies are decoded outside it.
     """
 
-    def __init__(self, store: Store, max_bytes: int = DEFAULT_MAX_BYTES) -> None:
+    def __init__(self, store: StoreBackend, max_bytes: int = DEFAULT_MAX_BYTES) -> None:
         if max_bytes < 0:
             raise ValueError(f"max_bytes must be >= 0, got {max_bytes}")
         self.store = store

@@ -28,7 +28,9 @@ import numpy as np
 from ..camera.pinhole import Camera, distortion_jacobian
 from ..errors import CameraError
 from ..raycast.cast import RayStatus, cast_rays
+from ..raycast.tiled_cast import DEFAULT_MEMORY_BUDGET, TiledRayCaster
 from ..terrain.dem import Dem
+from ..terrain.tiled_dem import TiledDem
 from .roads import RoadNetwork
 from .uncertainty import hit_covariances
 
@@ -209,7 +211,10 @@ class Geolocator:
 
     Parameters
     ----------
-    dem : Dem
+    dem : Dem or TiledDem
+        An in-memory DEM, or a tiled one larger than memory
+        (``core.terrain.tiled_dem``), cast with a
+        :class:`~demtrack.core.raycast.tiled_cast.TiledRayCaster`: the same hits.
     frame : LocalFrame
         Anchor of the site frame, for WGS84 output.
     roads : RoadNetwork, optional
@@ -223,11 +228,13 @@ class Geolocator:
     road_max_gap_m : float
         The road rule gives no answer when the ray passes more than this far above or
         below the road at its best crossing (m).
+    memory_budget : int
+        Bytes of decoded blocks a tiled DEM's caster may hold (unused for a ``Dem``).
     """
 
     def __init__(
         self,
-        dem: Dem,
+        dem: Dem | TiledDem,
         frame,
         roads: RoadNetwork | None = None,
         *,
@@ -235,6 +242,7 @@ class Geolocator:
         max_range_m: float = 5000.0,
         road_cutoff_m: float = 1000.0,
         road_max_gap_m: float = 3.0,
+        memory_budget: int = DEFAULT_MEMORY_BUDGET,
     ) -> None:
         for name, value in (
             ("pixel_sigma_px", pixel_sigma_px),
@@ -245,6 +253,9 @@ class Geolocator:
             if not float(value) > 0:
                 raise CameraError(f"{name} must be positive, got {value!r}")
         self.dem = dem
+        # A tiled DEM casts through its own caster (an LRU of blocks); a Dem shares its
+        # cached RayCaster through cast_rays.
+        self._tiled = TiledRayCaster(dem, memory_budget) if isinstance(dem, TiledDem) else None
         self.frame = frame
         self.roads = roads
         self.pixel_sigma_px = float(pixel_sigma_px)
@@ -421,7 +432,10 @@ class Geolocator:
         axes = np.asarray(perturb_axes_enu, dtype=np.float64).reshape(len(o), 2, 3)
         sig = np.asarray(perturb_sigmas_rad, dtype=np.float64).reshape(len(o), 2)
         n = len(o)
-        result = cast_rays(self.dem, o, d, self.max_range_m, mode="all")
+        if self._tiled is not None:
+            result = self._tiled.cast(o, d, self.max_range_m, mode="all")
+        else:
+            result = cast_rays(self.dem, o, d, self.max_range_m, mode="all")
         counts = np.diff(result.offsets)
         ray_of_hit = np.repeat(np.arange(n), counts)
         roads = self.roads

@@ -27,7 +27,13 @@ import numpy as np
 from ..errors import DemError
 from ._pyramid_kernels import build_pyramid_kernel
 
-__all__ = ["MinMaxPyramid", "build_pyramid", "pyramid_level_shapes", "pyramid_levels_numpy"]
+__all__ = [
+    "MinMaxPyramid",
+    "build_pyramid",
+    "pyramid_level_shapes",
+    "pyramid_levels_above",
+    "pyramid_levels_numpy",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,9 +109,18 @@ def pyramid_levels_numpy(elevation: np.ndarray) -> list[np.ndarray]:
     hole = np.isnan(corners).any(axis=0)
     mx = np.where(hole, np.inf, np.nanmax(np.where(hole, 0, corners), axis=0))
     mn = np.where(hole, -np.inf, np.nanmin(np.where(hole, 0, corners), axis=0))
-    levels = [np.stack([mx, mn], axis=-1).astype(np.float32)]
     # At least one stored level, even over a single patch (a 2 x 2 grid).
-    while len(levels) == 1 or levels[-1].shape[:2] != (1, 1):
+    return pyramid_levels_above(np.stack([mx, mn], axis=-1).astype(np.float32), at_least=1)
+
+
+def pyramid_levels_above(level: np.ndarray, *, at_least: int = 0) -> list[np.ndarray]:
+    """``level`` (``(rows, cols, 2)`` max, min) and every coarser level up to ``(1, 1)``.
+
+    Each is the max/min of the ``2 x 2`` nodes below it (a last odd row/column covers one).
+    ``at_least`` coarser levels are made even when ``level`` is already ``(1, 1)``.
+    """
+    levels = [np.asarray(level, np.float32)]
+    while len(levels) <= at_least or levels[-1].shape[:2] != (1, 1):
         lv = levels[-1]
         r, c = lv.shape[:2]
         # Pad odd sizes by repeating the last row/column (a no-op for max and min).

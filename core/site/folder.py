@@ -18,6 +18,12 @@ Manifest::
      "sensors": [{"id": "cam1", "name": "...", "head": {PanTiltHead.to_dict()},
                   "pan_deg": p, "tilt_deg": t, "image": "images/cam1.png"}]}
 
+A site larger than memory adds ``"dem_tiled": "dem-tiled.tif"`` (a tiled DEM with block
+min/max, ``demtrack dem tile``; ``core.terrain.tiled_dem``) and optionally
+``"dem_memory_budget_mb"`` (1024): geolocation then casts against the tiled DEM through a
+:class:`~demtrack.core.raycast.tiled_cast.TiledRayCaster` holding at most that much of it,
+while ``dem`` (a coarser overview that fits, for the console) serves everything else.
+
 A sensor entry may also carry, each written only when not its default:
 
 * ``"roll_deg"`` (0): the camera's bank about its optical axis;
@@ -68,6 +74,7 @@ from ..geo.geoid import EGM96_GRID, GeoidModel
 from ..geolocation.geolocate import Geolocator
 from ..geolocation.roads import RoadNetwork
 from ..terrain.dem import Dem
+from ..terrain.tiled_dem import TiledDem
 from .road_io import read_roads_geojson
 
 __all__ = [
@@ -171,6 +178,8 @@ class Site:
     orthophoto_path: Path | None = None
     geoid_undulation_m: float = 0.0
     geoid: GeoidModel = field(default_factory=GeoidModel.ellipsoidal)
+    tiled_dem: TiledDem | None = None
+    tiled_budget_bytes: int = 1 << 30
 
     def sensor(self, sensor_id: str) -> Sensor:
         """The sensor called ``sensor_id``.
@@ -188,7 +197,10 @@ class Site:
             raise UnknownSensorError(msg) from None
 
     def geolocator(self, **kwargs: Any) -> Geolocator:
-        """A :class:`Geolocator` on this site's DEM, frame and roads."""
+        """A :class:`Geolocator` on this site's DEM (the tiled one if any), frame and roads."""
+        if self.tiled_dem is not None:
+            kwargs.setdefault("memory_budget", self.tiled_budget_bytes)
+            return Geolocator(self.tiled_dem, self.frame, self.roads, **kwargs)
         return Geolocator(self.dem, self.frame, self.roads, **kwargs)
 
 
@@ -342,6 +354,13 @@ def load_site(root: str | Path) -> Site:
         dem = Dem.read(_inside(root, doc.get("dem"), "dem"))
         roads_rel = doc.get("roads")
         roads = read_roads_geojson(_inside(root, roads_rel, "roads"), frame) if roads_rel else None
+        tiled_rel = doc.get("dem_tiled")
+        tiled = TiledDem.open(_inside(root, tiled_rel, "dem_tiled")) if tiled_rel else None
+        budget_mb = doc.get("dem_memory_budget_mb", 1024)
+        if isinstance(budget_mb, bool) or not isinstance(budget_mb, int | float) or budget_mb <= 0:
+            raise SiteError(
+                f"site.json: 'dem_memory_budget_mb' must be a positive number, got {budget_mb!r}"
+            )
     except SiteError:
         raise
     except DemtrackError as exc:
@@ -372,6 +391,8 @@ def load_site(root: str | Path) -> Site:
         ortho,
         n_anchor,
         geoid,
+        tiled,
+        int(budget_mb * 2**20),
     )
 
 

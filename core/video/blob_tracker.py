@@ -11,6 +11,9 @@ committed only after ``min_history`` frames (Lipton et al.'s temporal consistenc
 clutter votes counted: a track that is mostly clutter is reported as clutter. A track
 is a moving object (``moved``) once it has travelled half a box diagonal from where it
 appeared: motion that goes nowhere (a tree crown in the wind) is not an object.
+A track is seen only in part (``partial``) while its object slides behind, or out from
+behind, an occluder: one side edge of its box stands still while the other moves
+steadily (:func:`partial_view`).
 """
 
 from __future__ import annotations
@@ -43,6 +46,12 @@ class BlobTrack:
     scores: list[float] = field(default_factory=list)
     origin_px: np.ndarray | None = None  # box centre when first seen
     moved: bool = False  # has travelled ``travel`` box diagonals from its origin
+    recent: list = field(default_factory=list)  # the last 4 boxes
+
+    @property
+    def partial(self) -> bool:
+        """Seen in part at an occluder's edge (see :func:`partial_view`)."""
+        return partial_view(self.recent)
 
     def predict(self, t_s: float) -> tuple[float, float, float, float]:
         """The box moved on by the velocity to ``t_s``."""
@@ -70,6 +79,26 @@ class TrackedBlob:
     cls: str | None
     frame_cls: str
     score: float
+    partial: bool = False
+
+
+def partial_view(boxes: Sequence[tuple[float, float, float, float]]) -> bool:
+    """Whether a track's last four boxes show an object passing an occluder's edge.
+
+    Over the last three frames one side edge stood still (within half a pixel in all)
+    while the other moved steadily one way, 3 px or more in all: the object slides
+    behind (or out from behind) something, the box is its visible part and the box's
+    bottom-centre not the object's foot.
+    """
+    if len(boxes) < 4:
+        return False
+    b = np.asarray(boxes[-4:], dtype=np.float64)
+    for still, moving in ((0, 2), (2, 0)):
+        d_still, d_moving = np.diff(b[:, still]), np.diff(b[:, moving])
+        steady = (d_moving > 0).all() or (d_moving < 0).all()
+        if (np.abs(d_still) <= 0.5).all() and steady and abs(d_moving.sum()) >= 3.0:
+            return True
+    return False
 
 
 def _centre(b: tuple[float, float, float, float]) -> np.ndarray:
@@ -177,6 +206,7 @@ class BlobTracker:
                     self.travel * diag, 3.0
                 )
             tr.votes[classes[j]] += 1
+            tr.recent = [*tr.recent[-3:], blob.bbox]
             tr.scores.append(float(scores[j]))
             tr.scores = tr.scores[-50:]
             out.append(
@@ -186,6 +216,7 @@ class BlobTracker:
                     tr.voted_class(self.min_history),
                     classes[j],
                     float(np.mean(tr.scores)),
+                    tr.partial,
                 )
             )
         return out

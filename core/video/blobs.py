@@ -159,7 +159,7 @@ def components(fg: np.ndarray, min_area: float = 0.0) -> list[Component]:
 def blobs_from_mask(
     fg: np.ndarray,
     *,
-    min_area_px: float,
+    min_area_px: float | np.ndarray,
     scale: float = 1.0,
     keep: Callable[[list[Component]], list[bool]] | None = None,
 ) -> list[Blob]:
@@ -169,15 +169,25 @@ def blobs_from_mask(
     ----------
     fg : ndarray of uint8, shape (h, w)
         Non-zero = foreground, at the processing resolution.
-    min_area_px : float
-        Smaller regions (in full-frame pixels) are dropped.
+    min_area_px : float or ndarray
+        Smaller regions (in full-frame pixels) are dropped; an array (the shape of
+        ``fg``) gives the minimum per pixel, looked up at each region's foot (its
+        bottom row, centre column).
     scale : float
         Full-frame pixels per processing pixel (2 when the model ran at half size).
     keep : callable, optional
         ``keep(components)`` -> one bool per :class:`Component`: only those kept become
         blobs.
     """
-    comps = components(fg, min_area_px / (scale * scale))
+    s2 = scale * scale
+    if isinstance(min_area_px, np.ndarray):  # per foot pixel
+        comps = [
+            c
+            for c in components(fg, float(min_area_px.min()) / s2)
+            if c.area * s2 >= min_area_px[c.rect[1] + c.rect[3] - 1, c.rect[0] + c.rect[2] // 2]
+        ]
+    else:
+        comps = components(fg, min_area_px / s2)
     flags = [True] * len(comps) if keep is None else keep(comps)
     return [blob_of(c, scale) for c, ok in zip(comps, flags, strict=True) if ok]
 

@@ -27,6 +27,12 @@ real-time video", and the hybrid of the VSAM final report (Collins et al. 2000, 
   kept; a foreground pixel that matches that older background again is where the object
   stood and has gone: it is background at once (the mean takes the image, the old value
   is dropped), before components are formed, so no box stays on the empty place.
+- **Calm background**: three-frame motion counts only where the learnt background is
+  calm (every sigma within 4 px at most ``calm_factor`` times the scene's median sigma,
+  the camera's noise). A crown's texture and outline give its pixels sigmas 3-10 times
+  the noise even where a gust sways it into pixels of low motion rate; a component
+  whose moving pixels all lie there has no evidence of an object and is learnt into
+  the background like a ghost. A target over the grass or a road is over calm pixels.
 - Components below ``min_area_px`` and pixels under the ignore mask are dropped.
 
 The per-pixel work is OpenCV primitives (``cv2.absdiff``, ``cv2.compare``,
@@ -95,6 +101,12 @@ class VsamDetector:
         not an object. 1 turns the test off.
     restless_s : float
         Time constant of that per-pixel motion rate (s).
+    calm_factor : float
+        A pixel's motion is evidence of an object only where the background is calm:
+        its learnt sigma, and every sigma within 4 px of it, at most this many times the
+        scene's median sigma (the camera's noise). Swaying crowns are learnt with large
+        variances (their texture and outline flicker at the edge of the model); motion
+        there is the crown's. 0 turns the test off.
     hold_s : float
         A kept object that stops is still reported this long after its last motion;
         then (and any foreground region never validated by motion, a ghost) it is learnt
@@ -120,6 +132,7 @@ class VsamDetector:
         hold_s: float = 5.0,
         restless: float = 0.12,
         restless_s: float = 10.0,
+        calm_factor: float = 3.0,
         validate: bool = True,
         downscale: int = 1,
     ) -> None:
@@ -146,6 +159,7 @@ class VsamDetector:
         self.k = float(threshold_sigma)
         self.min_diff = float(min_diff)
         self.min_area_px = float(min_area_px)
+        self.min_area: float | np.ndarray = self.min_area_px  # or a map, set_min_area_map
         self.validate = bool(validate)
         self.absorb_frames = max(1, int(round(absorb_s * fps)))
         full_mask = prepare_mask(mask, self.size)
@@ -159,6 +173,9 @@ class VsamDetector:
         self._var: np.ndarray | None = None
         self._prev: list[np.ndarray] = []  # I_{n-1}, I_{n-2} (uint8)
         self._thr: tuple[np.ndarray, np.ndarray] | None = None
+        self.calm_factor = float(calm_factor)
+        self._calm: np.ndarray | None = None  # 255 where the background is calm
+        self._calm_kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (9, 9))  # 4 px
         self._still = np.zeros(self.work_size[::-1], np.uint16)  # frames fg without motion
         self._one16 = np.ones_like(self._still)
         self._kept: list[tuple[float, float, float, float]] = []
@@ -175,6 +192,19 @@ class VsamDetector:
         self._absorbed = np.zeros(self.work_size[::-1], np.uint8)  # 255 where mu_old holds
         self._n_absorbed = 0
         self.n_frames = 0
+
+    def set_min_area_map(self, min_area_px: np.ndarray) -> None:
+        """Make the minimum blob area a function of the foot pixel.
+
+        ``min_area_px`` : ``(h, w)`` full-frame minimum areas (full-frame pixels) by
+        foot pixel, e.g. :func:`~.scale.min_area_map` of the person's size there.
+        """
+        m = np.asarray(min_area_px, dtype=np.float32)
+        if m.shape != self.size[::-1] or not np.isfinite(m).all() or (m < 1).any():
+            raise VideoError(f"min_area_px must be a finite (h, w) = {self.size[::-1]} map >= 1")
+        if self.scale > 1:
+            m = np.asarray(cv2.resize(m, self.work_size, interpolation=cv2.INTER_AREA), np.float32)
+        self.min_area = np.ascontiguousarray(m)
 
     def _prepare(self, image: np.ndarray) -> np.ndarray:
         g = _gray(image)
@@ -197,6 +227,13 @@ class VsamDetector:
             np.maximum(thr, np.float32(self.min_diff), out=thr)
             thr8 = np.floor(np.minimum(thr, 255.0)).astype(np.uint8)
             self._thr = (thr, thr8)
+            if self.calm_factor > 0:
+                # sigma <= calm_factor x the scene's median sigma (its noise floor), as a
+                # threshold: k sigma <= k calm_factor median
+                floor = float(np.median(thr[::8, ::8])) / self.k
+                limit = max(self.k * self.calm_factor * floor, self.min_diff)
+                calm = np.where(thr <= limit, np.uint8(255), np.uint8(0))
+                self._calm = cv2.erode(calm, self._calm_kernel)
         if self._thr is None:
             raise VideoError("no background model yet")
         return self._thr
@@ -231,6 +268,8 @@ class VsamDetector:
         # so swaying crowns are known within about a second of the first frame
         rate = max(self._activity_rate, 1.0 / (self.n_frames + self._fps))
         cv2.accumulateWeighted(moving, self._activity, rate)
+        if self._calm is not None:  # motion over a restless background is no evidence
+            moving = cv2.bitwise_and(moving, self._calm)
         self._update(img, diff_bg, fg, moving)
         if self.n_frames < 3:
             return []
@@ -241,12 +280,12 @@ class VsamDetector:
         if self._keep_mask is not None:
             clean = cv2.bitwise_and(clean, self._keep_mask)
         if not self.validate:
-            blobs = blobs_from_mask(clean, min_area_px=self.min_area_px, scale=self.scale)
+            blobs = blobs_from_mask(clean, min_area_px=self.min_area, scale=self.scale)
             self._kept = [b.bbox for b in blobs]
             return blobs
         state: dict = {}
         keep = self._validator(moving, state)
-        blobs = blobs_from_mask(clean, min_area_px=self.min_area_px, scale=self.scale, keep=keep)
+        blobs = blobs_from_mask(clean, min_area_px=self.min_area, scale=self.scale, keep=keep)
         self._kept = [b.bbox for b in blobs]
         self._last_motion = state["stamps"]
         for c in state["rejected"]:  # ghosts and long-still regions: learn them now

@@ -6,7 +6,14 @@ geolocated foot point and votes the class over the blob's track. Output runs a f
 are released once the tracks have that many more frames of history, so each carries the
 majority class of its track including its near future, a track too short to commit
 (a flicker) never comes out, and records still leave in time order. Clutter is dropped
-(and, with ``require_travel``, a track that has not yet travelled in the image).
+(and, with ``require_travel``, a track that has not yet travelled in the image), and so
+is a blob that is only a part of its object (``whole_only``): its own class this frame
+is not its track's, or it is a vehicle's sliding past an occluder's edge
+(:func:`~.blob_tracker.partial_view`); its bottom-centre is not the object's foot, and
+such feet from two cameras split one car into two tracks downstream.
+
+With a metric classifier and the VSAM detector, the detector's minimum blob area follows
+a person's size at the foot pixel (:mod:`.scale`).
 
 Detectors by name (:func:`make_detector`): ``vsam`` (the default,
 :class:`~.detector.VsamDetector`), ``mog2``, ``knn`` (OpenCV), ``onnx:PATH`` (a
@@ -34,6 +41,7 @@ from .classify import CLUTTER, BlobClassifier
 from .detector import VsamDetector
 from .opencv_models import KnnDetector, Mog2Detector
 from .reader import Frame, KlvPacket, VideoReader
+from .scale import min_area_map, person_area_map
 
 if TYPE_CHECKING:
     from ..site.folder import Site
@@ -108,6 +116,12 @@ class VideoDetections:
     require_travel : bool
         Report a track only once it has travelled (``BlobTrack.moved``); off by default,
         as an object moving along the line of sight hardly travels in the image.
+    scale_min_area : bool
+        With a metric classifier and the VSAM detector, the detector's minimum blob area
+        becomes 40 % of a person's area at each foot pixel (:mod:`.scale`; at least 4 px,
+        at most the detector's own minimum), so that far walkers a few pixels wide stay.
+    whole_only : bool
+        Withhold the blobs that are only a part of their object (module docstring).
     """
 
     def __init__(
@@ -119,14 +133,23 @@ class VideoDetections:
         tracker: BlobTracker | None = None,
         *,
         require_travel: bool = False,
+        scale_min_area: bool = True,
+        whole_only: bool = True,
     ) -> None:
         self.reader = reader
         self.require_travel = bool(require_travel)
+        self.whole_only = bool(whole_only)
         self.detector = detector
         self.sensor = sensor
         self.classifier = classifier or BlobClassifier()
         self.tracker = tracker or BlobTracker()
         self.lag = self.tracker.min_history
+        if scale_min_area and self.classifier.metric and isinstance(detector, VsamDetector):
+            # the minimum blob area follows a person's size at the foot pixel's range
+            cam, geo = self.classifier.camera, self.classifier.geolocator
+            area = person_area_map(cam, geo)
+            if area.shape == detector.size[::-1]:
+                detector.set_min_area_map(min_area_map(area, ceil_px=detector.min_area_px))
 
     def __iter__(self) -> Iterator[Detection]:
         """Every detection, in time order."""
@@ -151,6 +174,8 @@ class VideoDetections:
             cls = track.voted_class(self.tracker.min_history)
             if cls is None or cls == CLUTTER or (self.require_travel and not track.moved):
                 continue
+            if self.whole_only and (tb.frame_cls != cls or (cls == "vehicle" and tb.partial)):
+                continue  # a part of the object (hidden, cut): its foot is not the object's
             dets.append(
                 Detection(t_s, self.sensor, tb.blob.bbox, cls, round(tb.score, 3), tb.local_id)
             )

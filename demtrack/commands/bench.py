@@ -9,6 +9,7 @@ __all__ = ["register"]
 
 def _run(args: argparse.Namespace) -> int:
     from demtrack.bench import (
+        large_dem,
         lidar_holdout,
         pipeline_replay,
         raycast,
@@ -25,6 +26,7 @@ def _run(args: argparse.Namespace) -> int:
         "pipeline": pipeline_replay.main,
         "lidar-holdout": lidar_holdout.main,
         "video": video_detect.main,
+        "large-dem": large_dem.main,
         "reprocess": reprocess_bench.main,
     }
     if args.bench == "console-soak":  # Playwright is imported only for this one
@@ -67,6 +69,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         add_help=False,
     )
     vd.set_defaults(func=_run)
+    ld = bsub.add_parser(
+        "large-dem",
+        help="camera rays over a tiled DEM larger than memory, under a memory budget",
+        add_help=False,
+    )
+    ld.set_defaults(func=_run)
     rp = bsub.add_parser(
         "reprocess",
         help="archive reprocessing: local detections/s, Dask at 1, 2, 4 workers, overhead",

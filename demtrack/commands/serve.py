@@ -206,6 +206,8 @@ def _run(args: argparse.Namespace) -> int:
         overrides["site"] = DEFAULT_SITE
     if args.db is not None:
         overrides["db_path"] = args.db
+    if args.database_url is not None:
+        overrides["database_url"] = args.database_url
     if args.no_warm_up:
         overrides["warm_up"] = False
     if args.video and not args.replay:
@@ -224,7 +226,7 @@ def _run(args: argparse.Namespace) -> int:
     check_startup(app)  # a broken site or database: one line and exit 2, not a traceback
     settings = app.state.settings
     print_token(app)
-    print(f"site {settings.site}, database {settings.resolved_db_path}", flush=True)
+    print(f"site {settings.site}, database {settings.database_label}", flush=True)
 
     def ready(port: int) -> None:
         if app.state.viser_url is not None:
@@ -257,6 +259,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=None,
         metavar="PATH",
         help="SQLite file (default: DIR/console.sqlite3)",
+    )
+    p.add_argument(
+        "--database-url",
+        default=None,
+        metavar="URL",
+        help="keep the store on PostgreSQL + PostGIS instead: postgresql://USER@HOST:PORT/DB"
+        " (default: $DEMTRACK_DATABASE_URL, else the SQLite file; see docs/postgres.md)",
     )
     p.add_argument(
         "--no-warm-up",

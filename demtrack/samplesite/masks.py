@@ -46,7 +46,9 @@ __all__ = [
 
 #: Crowns nearer than this (m) are masked: with cam3's focal length (819 px) a 0.3 m sway
 #: is 3 px at 80 m and 4-8 px at 30-60 m, where the detector's restless test no longer
-#: absorbs the flicker (measured on the sample videos, docs/video.md).
+#: absorbs the flicker (measured on the sample videos, docs/video.md). The detector's
+#: calm-background rule now rejects those crowns too (cam3 scores the same without the
+#: mask); the mask stays as what an operator would paint over trees in wind.
 MASK_RANGE_M = 80.0
 #: The mask grows this far (px) around the near crown pixels.
 DILATE_PX = 4

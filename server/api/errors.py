@@ -27,7 +27,7 @@ from starlette.responses import Response
 
 from demtrack.core.errors import DemtrackError, NotFoundError
 
-from ..store.integrity import StoreFullError, StoreLostError
+from ..store.integrity import StoreFullError, StoreLostError, StoreUnreachableError
 
 __all__ = [
     "STATUS_BY_ERROR",
@@ -45,6 +45,7 @@ STATUS_BY_ERROR: dict[type[Exception], int] = {
     NotFoundError: 404,  # an unknown sensor, track, ...
     StoreFullError: 507,  # the disk is full: the write was refused, reads go on
     StoreLostError: 503,  # the database file was deleted or replaced while running
+    StoreUnreachableError: 503,  # the PostgreSQL server went away: nothing was stored
     DemtrackError: 422,  # everything else the client's input caused
 }
 

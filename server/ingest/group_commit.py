@@ -17,8 +17,8 @@ from typing import Any
 
 from demtrack.core.tracking.types import Detection
 
+from ..store.backend import StoreBackend
 from ..store.batches import BatchMaker
-from ..store.database import Store
 
 __all__ = ["Ack", "GroupCommit", "Request", "commit_group"]
 
@@ -85,7 +85,7 @@ class GroupCommit:
 
 
 def commit_group(
-    store: Store,
+    store: StoreBackend,
     group: list[Request],
     make: Callable[[Request], tuple[Any, ...]],
 ) -> tuple[list[tuple[int, Detection]], list[Ack]] | None:

@@ -34,7 +34,7 @@ from demtrack.core.tracking import build_tracker
 from demtrack.core.tracking.types import Detection, Fix, Track
 
 from ..live_events import LiveEventParams, LiveEvents
-from ..store.database import Store
+from ..store.backend import StoreBackend
 from ..store.derived import FixRow
 from ..store.integrity import StoreUnavailableError
 from .events import event_message, ingest_message
@@ -51,9 +51,12 @@ from .track_bodies import Geodetic, TrackBodies
 from .tracker_feed import TrackerFeed
 from .validate import validate_records
 
-__all__ = ["Pipeline", "Publisher", "pipeline_options"]
+__all__ = ["CATCH_UP_CHUNK", "Pipeline", "Publisher", "pipeline_options"]
 
 log = logging.getLogger("demtrack.server")
+
+#: Detections of other processes' batches read per query (:meth:`Pipeline.catch_up`).
+CATCH_UP_CHUNK = 5000
 
 
 def pipeline_options(settings: Any) -> dict[str, Any]:
@@ -98,7 +101,7 @@ class Pipeline:
     Parameters
     ----------
     site : Site
-    store : Store
+    store : StoreBackend
     method : str
         Tracking method (a key of :data:`demtrack.core.tracking.METHODS`).
     publish : callable
@@ -120,7 +123,7 @@ class Pipeline:
     def __init__(
         self,
         site: Site,
-        store: Store,
+        store: StoreBackend,
         method: str,
         publish: Publisher,
         *,
@@ -160,6 +163,14 @@ class Pipeline:
         self._flush_timer: threading.Timer | None = None
         self._inline: dict[str, Any] | None = None
         self._closed = False
+        #: Whether batches are tracked after their commit. False on a follower of a
+        #: cluster (:mod:`demtrack.server.cluster`): it only stores and acknowledges.
+        self.tracking = True
+        #: ``fence(conn)``, passed to every derived write (the cluster's lease check).
+        self.fence: Any = None
+        #: In a cluster, the newest detection id this process has considered: batches
+        #: other processes stored come after it (:meth:`catch_up`). None: one process.
+        self.tail_after: int | None = None
 
     # ------------------------------------------------------------- components
     @property
@@ -203,6 +214,80 @@ class Pipeline:
     def start(self) -> dict[str, int]:
         """Rebuild the tracker from the stored fixes and finish interrupted work.
 
+        See :meth:`_start`.
+        """
+        with self._lock:
+            return self._start()
+
+    def follow(self) -> None:
+        """Store and acknowledge batches from now on, without tracking them (a follower).
+
+        Loads what the acknowledgements check (each sensor's newest time and count, the
+        stored poses); :meth:`lead` starts tracking.
+        """
+        with self._lock:
+            self.tracking = False
+            self._load_ingest_state()
+
+    def lead(self, fence: Any) -> dict[str, int]:
+        """Start tracking from the durable state: the cluster's lease was acquired.
+
+        The tracking state is rebuilt from scratch (:meth:`_start`), every derived write
+        from now on carries ``fence``, and batches other processes store are taken up
+        by id (:meth:`catch_up`). Returns :meth:`start`'s counts.
+        """
+        with self._lock:
+            self.tracking = False
+            self.buffer = ReorderBuffer(self.reorder_lag_s)
+            self.feed = TrackerFeed(build_tracker(self.method, roads=self.site.roads), self.buffer)
+            self.bodies = TrackBodies(self.site.frame)
+            self.pose_book = PoseBook(self.site)
+            self.announcer = PoseAnnouncer(self.announcer.interval_s)
+            self.live_events = None
+            self.n_late = 0
+            self.fence = fence
+            self.tail_after = 0
+            counts = self._start()
+            self.tracking = True
+            return counts
+
+    def catch_up(self, below: int | None = None) -> int:
+        """Track the batches other processes stored since :attr:`tail_after`, by id.
+
+        ``below``: only detection ids under it (the lock is then held by the caller,
+        who is about to process its own batch, whose first id it is). Returns the number
+        of detections processed. A no-op unless this process tracks in a cluster.
+        """
+        if below is None:
+            with self._lock:
+                return self._catch_up(None)
+        return self._catch_up(below)
+
+    def _catch_up(self, below: int | None) -> int:
+        n = 0
+        while self.tracking and self.tail_after is not None:
+            rows = self.store.detections(self.tail_after, CATCH_UP_CHUNK, unprocessed=True)
+            if below is not None:
+                rows = [r for r in rows if r[0] < below]
+            if not rows:
+                break
+            self.tail_after = rows[-1][0]
+            for _, d in rows:  # counted here as this process counts its own batches
+                self._last_t[d.sensor] = max(d.t_s, self._last_t.get(d.sensor, d.t_s))
+                self._n_det[d.sensor] = self._n_det.get(d.sensor, 0) + 1
+            self._process(rows)
+            n += len(rows)
+        return n
+
+    def _load_ingest_state(self) -> None:
+        """Each sensor's newest detection time and count, and the stored poses."""
+        self._last_t = self.store.last_times()
+        self._n_det = self.store.sensor_counts()
+        self.pose_book.load(self.store.recent_poses(WINDOW_S), self.store.pose_last_times())
+
+    def _start(self) -> dict[str, int]:
+        """Rebuild the tracker from the stored fixes and finish interrupted work (lock held).
+
         The stored ``tracked`` fixes are sorted by ``(t_s, sensor, detection_id)``; those at most
         ``reorder_lag_s`` behind the newest go to the tracker, the rest back into the
         reorder buffer. Detections stored but not yet processed (a crash between commit
@@ -210,42 +295,47 @@ class Pipeline:
 
         Returns counts: ``replayed`` fixes and ``processed`` detections.
         """
-        with self._lock:
-            self._last_t = self.store.last_times()
-            self._n_det = self.store.sensor_counts()
-            # The poses first: the unprocessed detections below are geolocated with them.
-            self.pose_book.load(self.store.recent_poses(WINDOW_S), self.store.pose_last_times())
-            load_stored_fixes(self.store, self.buffer)
-            dropped: set[int] = set()
+        # The poses first: the unprocessed detections below are geolocated with them.
+        self._load_ingest_state()
+        load_stored_fixes(self.store, self.buffer)
+        dropped: set[int] = set()
 
-            def drop() -> list[int]:
-                ids = self._drop_ended()
-                dropped.update(ids)
-                return ids
+        def drop() -> list[int]:
+            ids = self._drop_ended()
+            dropped.update(ids)
+            return ids
 
-            replayed = self.feed.release(drop)
-            # Every track as the replay left it (the table may hold tracks of fixes whose
-            # batch was cut short); its messages were already sent before the restart.
-            # Tracks the replay forgot (ended long ago) keep their stored rows.
-            rows, _ = self._track_changes(self.tracker.tracks(), force=True)
-            self.store.write_derived([], rows, [], replace_tracks=True, keep_track_ids=dropped)
-            self.bodies.dirty_from.clear()
-            if self.event_params is not None:
-                known = self.store.activity(open_only=True) + self.store.latest_activity(
-                    EventKind.HANDOFF
-                )
-                self.live_events = LiveEvents(self.site, self.event_params, known)
-                if math.isfinite(self.feed.released_t):
-                    self.live_events.last_eval_t = self.feed.released_t
-            processed, after = 0, 0
-            while True:  # by id: detections waiting for their pose stay unprocessed
-                pending = self.store.detections(after, 5000, unprocessed=True)
-                if not pending:
-                    break
-                after = pending[-1][0]
-                self._process(pending)
-                processed += len(pending)
-            return {"replayed": replayed, "processed": processed}
+        replayed = self.feed.release(drop)
+        # Every track as the replay left it (the table may hold tracks of fixes whose
+        # batch was cut short); its messages were already sent before the restart.
+        # Tracks the replay forgot (ended long ago) keep their stored rows.
+        rows, _ = self._track_changes(self.tracker.tracks(), force=True)
+        self.store.write_derived(
+            [], rows, [], replace_tracks=True, keep_track_ids=dropped, **self._fenced()
+        )
+        self.bodies.dirty_from.clear()
+        if self.event_params is not None:
+            known = self.store.activity(open_only=True) + self.store.latest_activity(
+                EventKind.HANDOFF
+            )
+            self.live_events = LiveEvents(self.site, self.event_params, known)
+            if math.isfinite(self.feed.released_t):
+                self.live_events.last_eval_t = self.feed.released_t
+        processed, after = 0, 0
+        while True:  # by id: detections waiting for their pose stay unprocessed
+            pending = self.store.detections(after, 5000, unprocessed=True)
+            if not pending:
+                break
+            after = pending[-1][0]
+            self._process(pending)
+            processed += len(pending)
+        if self.tail_after is not None:
+            self.tail_after = after
+        return {"replayed": replayed, "processed": processed}
+
+    def _fenced(self) -> dict[str, Any]:
+        """``write_derived``'s fence keyword, when this process writes under a lease."""
+        return {} if self.fence is None else {"fence": self.fence}
 
     # ------------------------------------------------------------------ ingest
     def _validate(self, records: Sequence[Any]) -> tuple[list[Detection], dict[str, Any]]:
@@ -354,8 +444,14 @@ class Pipeline:
         if not acks:
             return
         posed = self._take_poses(group)
+        if not self.tracking:  # a follower: stored and acknowledged; the leader tracks it
+            return
         acks = [a for a in acks if a[0].get("kind") != "poses"]
         try:
+            if self.tail_after is not None:  # others' batches stored before this one first
+                if pending:
+                    self._catch_up(below=pending[0][0])
+                    self.tail_after = max(self.tail_after, pending[-1][0])
             self._process(pending, acks=acks, posed=posed)
         except StoreUnavailableError as exc:  # durable batches; start-up replays them
             log.error("processing after commit stopped: %s", exc)
@@ -406,7 +502,9 @@ class Pipeline:
                     return
                 events = self.announcer.flush(self.pose_book.newest)
                 if events:
-                    store_and_publish(self.store, self.publish, [], [], events, [])
+                    store_and_publish(
+                        self.store, self.publish, [], [], events, [], fence=self.fence
+                    )
                 self._arm_pose_flush()
         except Exception:  # noqa: BLE001 - a timer thread: log, never raise
             log.exception("sending held-back sensor_pose messages failed")
@@ -462,7 +560,7 @@ class Pipeline:
         if not pending and not acks:  # poses alone, no detection due: nothing to track
             moved = self.announcer.due(posed, self.pose_book.newest)
             if moved:
-                store_and_publish(self.store, self.publish, [], [], moved, [])
+                store_and_publish(self.store, self.publish, [], [], moved, [], fence=self.fence)
             self._arm_pose_flush()
             return
         dets = [d for _, d in pending]
@@ -522,7 +620,14 @@ class Pipeline:
                 ack["no_pose"] = sum(1 for i in ack["detection_ids"] if i in n_no_pose)
             events.append(("event", ingest_message(ack, n_fixes, t)))
         store_and_publish(
-            self.store, self.publish, rows, track_rows, events, activity, self.bodies.stored
+            self.store,
+            self.publish,
+            rows,
+            track_rows,
+            events,
+            activity,
+            self.bodies.stored,
+            fence=self.fence,
         )
         self._drop_ended()  # after their final rows are stored
         self._arm_pose_flush()

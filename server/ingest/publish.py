@@ -12,8 +12,8 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from ..hub import StreamMessage
+from ..store.backend import StoreBackend
 from ..store.codec import payload_dict, published_text
-from ..store.database import Store
 from ..store.derived import FixRow
 from .stream_messages import SensorStatusPayload, StreamPayload
 
@@ -33,20 +33,24 @@ def sensor_status_messages(
 
 
 def store_and_publish(
-    store: Store,
+    store: StoreBackend,
     publish: Publisher,
     fixes: Sequence[FixRow],
     tracks: Sequence[dict[str, Any]],
     events: Sequence[tuple[str, StreamPayload]],
     activity: Sequence[dict[str, Any]],
     stored_hook: Callable[[Sequence[dict[str, Any]]], None] | None = None,
+    *,
+    fence: Callable[[Any], None] | None = None,
 ) -> None:
     """Write a batch's derived rows in one transaction, then publish its messages in order.
 
     ``stored_hook(tracks)``: called once the rows are written, before publishing (the
-    track bodies' points are then clean).
+    track bodies' points are then clean). ``fence``: the cluster lease's check, run in
+    the write's transaction (:meth:`demtrack.server.cluster.lease.SiteLease.fence_check`);
+    a write that it refuses raises and publishes nothing.
     """
-    stored = store.write_derived(fixes, tracks, events, activity=activity)
+    stored = store.write_derived(fixes, tracks, events, activity=activity, fence=fence)
     if stored_hook is not None:
         stored_hook(tracks)
     publish(

@@ -13,7 +13,7 @@ import logging
 
 from demtrack.core.errors import DemtrackError
 
-from ..store.database import Store
+from ..store.backend import StoreBackend
 from .fix_codec import fix_from_body, fixes_from_bodies
 from .reorder import FixKey, ReorderBuffer
 
@@ -25,7 +25,7 @@ log = logging.getLogger("demtrack.server")
 CHUNK = 5000
 
 
-def load_stored_fixes(store: Store, buffer: ReorderBuffer) -> int:
+def load_stored_fixes(store: StoreBackend, buffer: ReorderBuffer) -> int:
     """Fill ``buffer`` with every stored fix the tracker had taken; how many.
 
     A body the constructor refuses (not one the server wrote) keeps its place in the

@@ -1,4 +1,9 @@
-"""SQLite persistence: detections, fixes, tracks and the event log.
+"""Persistence: detections, fixes, tracks and the event log, in SQLite or PostgreSQL.
+
+One interface (:class:`.backend.StoreBackend`), two databases: the SQLite file described
+here (the default) and PostgreSQL + PostGIS (:mod:`.postgres`, selected by a database URL:
+:func:`.opening.open_store`), with the same migrations, the same answers and the same
+durability promise.
 
 One file (WAL journal, ``synchronous=FULL``), a versioned schema with ordered migrations,
 one write connection and one read connection, each behind its own lock (the server calls
@@ -41,7 +46,12 @@ Modules
 :mod:`.derived`    fixes, tracks, activity and event-log writes
 :mod:`.queries`    read-side SQL
 :mod:`.integrity`  the store's id, the file check before each write, a full disk
-:mod:`.database`   opening and migrating the file; :class:`~.database.Store`
+:mod:`.dialect`    the statements where SQLite and PostgreSQL differ (SQLite's)
+:mod:`.reading`    every read, shared by both databases
+:mod:`.database`   opening and migrating the file; :class:`~.database.SqliteStore` (``Store``)
+:mod:`.backend`    the interface both stores have
+:mod:`.opening`    :func:`~.opening.open_store`: the store the settings name
+:mod:`.postgres`   the PostgreSQL + PostGIS store
 
 May import ``demtrack.core`` value types and :mod:`demtrack.server.track_history`; nothing
 here imports the ingest pipeline or the routers. Callers import from the modules; the
@@ -51,9 +61,10 @@ of the file format) that wants it as one namespace.
 
 from __future__ import annotations
 
+from .backend import StoreBackend
 from .batches import StoredBatch
 from .codec import dumps_json, encode_json, loads_json, published_text, track_body_text
-from .database import MIGRATIONS, SCHEMA_VERSION, Store, connect, migrate
+from .database import MIGRATIONS, SCHEMA_VERSION, SqliteStore, Store, connect, migrate
 from .queries import TrackTail
 from .schema import COUNTED_TABLES
 
@@ -61,7 +72,9 @@ __all__ = [
     "COUNTED_TABLES",
     "MIGRATIONS",
     "SCHEMA_VERSION",
+    "SqliteStore",
     "Store",
+    "StoreBackend",
     "StoredBatch",
     "TrackTail",
     "connect",

@@ -7,7 +7,6 @@ client key was seen before inserts nothing and gives its first report back.
 
 from __future__ import annotations
 
-import sqlite3
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -44,7 +43,7 @@ class StoredBatch:
 
 
 def insert_batch_rows(
-    c: sqlite3.Connection, batches: Sequence[tuple[BatchMaker, str | None]]
+    c: Any, batches: Sequence[tuple[BatchMaker, str | None]]
 ) -> list[StoredBatch]:
     """Insert ``batches`` (``(make, batch_key)`` each, in order) on ``c``, in its transaction.
 
@@ -69,10 +68,13 @@ def insert_batch_rows(
         made = make()
         detections, report = made[0], made[1]
         poses = made[2] if len(made) > 2 else ()
-        # One statement gives the batch's id and the detections' highest id.
+        # One statement gives the batch's id and the detections' highest id. The id is
+        # the next one, given explicitly (what SQLite picks itself), so both databases
+        # number batches alike, even after a rolled-back transaction.
         ((batch_id, last_id),) = c.execute(
-            "INSERT INTO batches (batch_key, n_records, n_accepted, report)"
-            " VALUES (?,?,?,?) RETURNING id, (SELECT MAX(id) FROM detections)",
+            "INSERT INTO batches (id, batch_key, n_records, n_accepted, report)"
+            " VALUES ((SELECT COALESCE(MAX(id), 0) + 1 FROM batches),?,?,?,?)"
+            " RETURNING id, (SELECT MAX(id) FROM detections)",
             (batch_key, report["n_records"], report["accepted"], dumps_json(report)),
         ).fetchall()
         # Ids are given explicitly (the next ones, in record order: the write lock

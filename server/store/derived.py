@@ -9,12 +9,12 @@ exactly what the fixes table holds.
 
 from __future__ import annotations
 
-import sqlite3
 from collections.abc import Iterable, Sequence
 from typing import Any
 
 from ..track_history import PointCuts
 from .codec import dumps_json, encode_json, encode_reusing, split_track_body
+from .dialect import SQLITE, Dialect
 from .queries import track_revs
 
 __all__ = ["FixRow", "write_derived_rows"]
@@ -23,14 +23,8 @@ __all__ = ["FixRow", "write_derived_rows"]
 FixRow = tuple[int, float, str, str, str, dict[str, Any]]
 
 
-def _next_id(c: sqlite3.Connection, sql: str) -> int:
-    """One more than the integer ``sql`` selects (1 when it selects nothing or NULL)."""
-    row = c.execute(sql).fetchone()
-    return 1 if row is None or row[0] is None else int(row[0]) + 1
-
-
 def write_derived_rows(
-    c: sqlite3.Connection,
+    c: Any,
     history: PointCuts,
     fixes: Iterable[FixRow],
     tracks: Sequence[dict[str, Any]],
@@ -39,24 +33,23 @@ def write_derived_rows(
     replace_tracks: bool,
     keep_track_ids: Iterable[int],
     activity: Iterable[dict[str, Any]],
+    dialect: Dialect = SQLITE,
 ) -> list[tuple[int, str]]:
     """Write derived rows on ``c`` (inside its transaction); each event's ``(seq, text)``.
 
     See :meth:`demtrack.server.store.database.Store.write_derived` for the arguments;
-    ``history`` records what each track write rewrote (for readers of tails).
+    ``history`` records what each track write rewrote (for readers of tails), ``dialect``
+    the SQL where the databases differ (:mod:`.dialect`).
     """
     # id(fix body) -> (the body, kept alive so no other object takes its id; JSON)
     encoded: dict[int, tuple[Any, bytes]] = {}
-    fix_rows = []
+    fix_rows, fix_bodies = [], []
     for i, t, s, k, st, b in fixes:
         raw = encode_json(b)
         encoded[id(b)] = (b, raw)
         fix_rows.append((i, t, s, k, st, raw.decode()))
-    c.executemany(
-        "INSERT OR REPLACE INTO fixes (detection_id, t_s, sensor, cls, status, body)"
-        " VALUES (?,?,?,?,?,?)",
-        fix_rows,
-    )
+        fix_bodies.append(b)
+    dialect.write_fixes(c, fix_rows, fix_bodies)
     if replace_tracks:
         history.clear()  # and nothing of this call is recorded: chains break
         keep = set(keep_track_ids)
@@ -88,14 +81,11 @@ def write_derived_rows(
         )
         cuts.append((r["id"], start))
         points += [(r["id"], start + k, t) for k, t in enumerate(texts)]
-    c.executemany(
-        "INSERT OR REPLACE INTO tracks (id, cls, t_start, t_end, e_min, n_min, e_max,"
-        " n_max, sensors, live, body) VALUES (?,?,?,?,?,?,?,?,?,?,?)",
-        heads,
-    )
-    # Points from the first that changed on: dropped, then written again.
+    # Points from the first that changed on: dropped, then written again; then the heads
+    # (PostgreSQL's track line is made from the stored points: they go first).
     c.executemany("DELETE FROM track_points WHERE track_id = ? AND k >= ?", cuts)
-    c.executemany("INSERT INTO track_points (track_id, k, point) VALUES (?,?,?)", points)
+    dialect.write_points(c, points)
+    dialect.write_track_heads(c, heads, [start for _, start in cuts])
     if cuts and not replace_tracks:
         starts: dict[int, int] = {}
         for i, start in cuts:
@@ -104,9 +94,11 @@ def write_derived_rows(
     for body in activity:
         row = c.execute("SELECT id FROM activity WHERE key = ?", (body["key"],)).fetchone()
         if row is None:
-            cur = c.execute(
-                "INSERT INTO activity (key, kind, t_start, t_end, track_ids, open, body)"
-                " VALUES (?,?,?,?,?,?,'')",
+            # The next id, given explicitly (SQLite's own choice): the same on both.
+            ((body["id"],),) = c.execute(
+                "INSERT INTO activity (id, key, kind, t_start, t_end, track_ids, open, body)"
+                " VALUES ((SELECT COALESCE(MAX(id), 0) + 1 FROM activity),?,?,?,?,?,?,'{}')"
+                " RETURNING id",
                 (
                     body["key"],
                     body["kind"],
@@ -115,8 +107,7 @@ def write_derived_rows(
                     dumps_json(body["track_ids"]),
                     int(body["open"]),
                 ),
-            )
-            body["id"] = int(cur.lastrowid or 0)
+            ).fetchall()
         else:
             body["id"] = int(row[0])
         c.execute(
@@ -132,16 +123,5 @@ def write_derived_rows(
             ),
         )
     rows = [(kind, encode_reusing(payload, encoded)) for kind, payload in events]
-    # AUTOINCREMENT: a sequence number is never reused, even after deletes.
-    # The larger of the two, in one statement (both are at least 0).
-    first = _next_id(
-        c,
-        "SELECT MAX(COALESCE((SELECT MAX(seq) FROM events), 0),"
-        " COALESCE((SELECT seq FROM sqlite_sequence WHERE name = 'events'), 0))",
-    )
-    seqs = list(range(first, first + len(rows)))
-    c.executemany(
-        "INSERT INTO events (seq, type, payload) VALUES (?, ?, ?)",
-        [(q, kind, text) for q, (kind, text) in zip(seqs, rows, strict=True)],
-    )
+    seqs = dialect.append_events(c, rows) if rows else []
     return [(q, text) for q, (_, text) in zip(seqs, rows, strict=True)]

@@ -13,8 +13,9 @@
   the write is refused with one line, reads go on, and the next write after space
   returns succeeds.
 
-Both errors are :class:`StoreUnavailableError`; the API answers 507 (full) or 503 (lost)
-with the message.
+These errors, and :class:`StoreUnreachableError` (a PostgreSQL server that went away), are
+:class:`StoreUnavailableError`; the API answers 507 (full) or 503 (lost, unreachable) with
+the message.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ __all__ = [
     "StoreFullError",
     "StoreLostError",
     "StoreUnavailableError",
+    "StoreUnreachableError",
     "ensure_store_id",
     "translate_write_error",
 ]
@@ -48,6 +50,10 @@ class StoreFullError(StoreUnavailableError):
 
 class StoreLostError(StoreUnavailableError):
     """The database file was deleted or replaced while the server ran."""
+
+
+class StoreUnreachableError(StoreUnavailableError):
+    """The database server (PostgreSQL) could not be reached: nothing was written."""
 
 
 def ensure_store_id(conn: sqlite3.Connection) -> str:

@@ -37,7 +37,9 @@ def insert_pose_rows(c: sqlite3.Connection, batch_id: int, rows: Sequence[PoseRo
 
 def pose_last_times(c: sqlite3.Connection) -> dict[str, float]:
     """Each sensor's newest stored pose time (s)."""
-    rows = c.execute("SELECT sensor, MAX(t_s) FROM poses GROUP BY sensor").fetchall()
+    rows = c.execute(
+        "SELECT sensor, MAX(t_s) FROM poses GROUP BY sensor ORDER BY sensor"
+    ).fetchall()
     return {str(s): float(t) for s, t in rows}
 
 

@@ -31,12 +31,20 @@ def records() -> list[dict]:
     return out
 
 
-def test_sigkill_mid_ingest_loses_no_acknowledged_detection(sample_site_dir, tmp_path):
+@pytest.mark.parametrize("backend", ["sqlite", "postgres"])
+def test_sigkill_mid_ingest_loses_no_acknowledged_detection(
+    backend, sample_site_dir, tmp_path, request
+):
+    """On either database (PostgreSQL: ``DEMTRACK_DATABASE_URL``); the reference runs
+    are SQLite's, so on PostgreSQL the tracks and events are also compared across them."""
     db = tmp_path / "console.sqlite3"
+    env = {}
+    if backend == "postgres":
+        env["DEMTRACK_DATABASE_URL"] = request.getfixturevalue("postgres_url")
     recs = records()
     batches = [recs[i : i + 4] for i in range(0, len(recs), 4)]
     acked: list[dict] = []
-    proc, url = start(sample_site_dir, db)
+    proc, url = start(sample_site_dir, db, **env)
     stop = threading.Event()
 
     def feed() -> None:
@@ -61,7 +69,7 @@ def test_sigkill_mid_ingest_loses_no_acknowledged_detection(sample_site_dir, tmp
         t.join(20)
         n_acked = len(acked)
         assert 6 <= n_acked < len(batches), "the kill should land mid-stream"
-        proc, url = start(sample_site_dir, db)
+        proc, url = start(sample_site_dir, db, **env)
         with httpx.Client(base_url=url, headers=AUTH, timeout=10) as c:
             stored = c.get("/api/detections", params={"limit": 10000}).json()
             ids = {d["id"] for d in stored}
@@ -80,6 +88,7 @@ def test_sigkill_mid_ingest_loses_no_acknowledged_detection(sample_site_dir, tmp
             events = _events(c)
         assert len(stored) == len(recs)
         assert tracks
+        assert backend == "sqlite" or not db.exists()  # the store really was PostgreSQL
     finally:
         proc.kill()
         proc.wait(10)

@@ -137,3 +137,16 @@ def test_apparent_height_of_a_deep_body_seen_from_above():
     assert apparent_height_m(1.7, 0.4, 1.0, 30.0) == 1.7  # a camera below the top: level
     # far away the roof's depth hardly shows
     assert apparent_height_m(1.5, 4.5, 10.0, 2000.0) == pytest.approx(1.5, abs=0.02)
+
+
+def test_the_metric_pipeline_scales_the_minimum_area_with_range(site, street):
+    pipe = video_detections(site, "cam1", street.path)
+    area = pipe.detector.min_area
+    assert isinstance(area, np.ndarray) and area.shape == (720, 1280)
+    assert area.min() >= 4.0 and area.max() == 16.0
+    # the horizon's far ground (rows 320-360 of the centre column) gets a smaller floor
+    # than the near ground at the bottom; the sky above keeps the fixed one
+    col = area[:, 640]
+    assert col[700] == 16.0 and col[320] < col[360] < 16.0 and col[100] == 16.0
+    plain = video_detections(site, "cam1", street.path, metric=False)
+    assert plain.detector.min_area == 16.0  # no geometry: the fixed floor
