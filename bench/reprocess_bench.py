@@ -28,7 +28,9 @@ def _write(site_dir: str):  # noqa: ANN202  (the reprocess writer of this site)
     from demtrack.reprocess.tasks import site_at
     from demtrack.server.track_export import write_track_file
 
-    return lambda tracks, path: write_track_file(site_at(site_dir), tracks, path)
+    return lambda tracks, path: write_track_file(
+        site_at(site_dir), tracks, path, batch_geodetic=True
+    )
 
 
 def _timed_dask(site_dir: str, read, plan, method: str, workers: int, out: Path):  # noqa: ANN001, ANN202

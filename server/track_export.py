@@ -158,15 +158,36 @@ def check_track_suffix(out: Path) -> str:
 
 
 def write_track_file(
-    site: Site, tracks: Sequence[Track], out: Path, epoch: datetime | None = None
+    site: Site,
+    tracks: Sequence[Track],
+    out: Path,
+    epoch: datetime | None = None,
+    *,
+    batch_geodetic: bool = False,
 ) -> None:
-    """Write ``tracks`` in the format of ``out``'s suffix (and a ``.csvt`` beside a CSV)."""
+    """Write ``tracks`` in the format of ``out``'s suffix (and a ``.csvt`` beside a CSV).
+
+    ``batch_geodetic``: convert every track's points to WGS84 in one call per track
+    (fast for millions of points; the last bits may differ from the one-point calls,
+    which are numpy's other matrix path, so ``demtrack track`` keeps those).
+    """
     from demtrack.core.io.track_io import TRACK_CSVT, TimeBase, write_tracks
 
     suffix = check_track_suffix(out)
     frame = site.frame
+    known: dict[tuple[float, float, float], tuple[float, float, float]] = {}
+    if batch_geodetic:
+        for t in tracks:
+            enu = [tuple(float(c) for c in p.p_enu) for p in t.points]
+            if enu:
+                e, n, u = zip(*enu, strict=True)
+                lat, lon, h = (np.atleast_1d(a).tolist() for a in frame.to_geodetic(e, n, u))
+                known.update(zip(enu, zip(lat, lon, h, strict=True), strict=True))
 
     def to_geodetic(e: float, n: float, u: float) -> tuple[float, float, float]:
+        got = known.get((e, n, u))
+        if got is not None:
+            return got
         lat, lon, h = frame.to_geodetic(e, n, u)
         return float(lat), float(lon), float(h)
 

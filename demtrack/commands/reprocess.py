@@ -42,7 +42,7 @@ def _run(args: argparse.Namespace) -> int:
         Path(args.output),
         settings,
         tracks_name=tracks_name,
-        write_tracks=lambda tracks, path: write_track_file(site, tracks, path),
+        write_tracks=lambda tracks, path: write_track_file(site, tracks, path, batch_geodetic=True),
     )
     run = manifest["run"]
     skipped = {**manifest["archive_skipped"], **manifest["geolocation_skipped"]}

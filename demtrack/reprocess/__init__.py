@@ -8,11 +8,13 @@ to the next. Random seeds come from the group and the segment only, so the outpu
 their content hash) are the same whatever the engine (one process, or Dask with any
 number of workers), the order tasks complete in, or a worker dying mid-run.
 
-Modules: :mod:`.archive` (the Parquet layout, every reader), :mod:`.store_export` (a
-store's detections as an archive), :mod:`.fix_columns` (fixes as columns, between tasks),
+Modules: :mod:`.archive` (the Parquet layout, file and Parquet readers),
+:mod:`.store_export` (a store's detections as an archive), :mod:`.sources` (any source
+read into canonical order), :mod:`.fix_columns` (fixes as columns, between tasks),
 :mod:`.groups` (sensor groups by footprint overlap), :mod:`.plan` (parts, segments,
-windows, seeds), :mod:`.tasks` (what a worker runs), :mod:`.engines` (local and Dask),
-:mod:`.outputs` (tracks, fixes, manifest, content hash), :mod:`.synth` (the 12-camera
-site and the synthetic million-detection archive). May import ``demtrack.core``,
-``demtrack.server.store`` (read methods only) and ``demtrack.samplesite``.
+windows, jobs, seeds), :mod:`.tasks` (what a worker runs), :mod:`.engines` (local and
+Dask), :mod:`.outputs` (tracks, fixes, manifest, content hash), :mod:`.run` (one run,
+archive to outputs), :mod:`.synth` (the 12-camera site and the synthetic archive).
+May import ``demtrack.core``, ``demtrack.server`` (the store's read methods, the export
+heights) and ``demtrack.samplesite``; the CLI passes it the track writer.
 """

@@ -1,10 +1,9 @@
 """A store's detections (and the poses stamped at their moments) as archive rows.
 
 Reads only the store's public read methods (``detections``, ``sensor_counts``,
-``poses``), so any store implementation serves. A SQLite file is opened with
-:class:`demtrack.server.store.database.Store`; a ``postgresql://`` URL needs a store
-factory ``demtrack.server.store.open_store(url)`` (the PostgreSQL store's), and a
-``sqlite:///PATH`` URL names a file.
+``poses``), so either store serves: a SQLite file (or a ``sqlite:///PATH`` URL) or a
+PostgreSQL database (``postgresql://`` URL), opened by the server's own
+:func:`demtrack.server.store.opening.open_store`.
 """
 
 from __future__ import annotations
@@ -28,32 +27,24 @@ _PAGE = 50_000
 
 @contextmanager
 def open_store_source(source: str) -> Iterator[Any]:
-    """The store a path or URL names, closed on exit.
+    """The store a path or URL names (:func:`demtrack.server.store.opening.open_store`).
+
+    Closed on exit. ``sqlite:///PATH`` names a file; ``postgresql://`` a database.
 
     Raises
     ------
     InputFileError
-        A missing SQLite file, or a URL no store here can open.
+        A missing SQLite file.
+    SettingsError
+        A database that cannot be used (one line, the URL without its password).
     """
+    from demtrack.server.store.opening import open_store
+
     if source.startswith("sqlite:///"):
         source = source[len("sqlite:///") :]  # sqlite:////abs/path keeps its leading /
-    if "://" in source:
-        from demtrack.server import store as store_pkg
-
-        factory = getattr(store_pkg, "open_store", None)
-        if factory is None:
-            raise InputFileError(f"no store here opens {source.split('://')[0]}:// URLs")
-        try:
-            store = factory(source)
-        except OSError as exc:  # unreachable server
-            raise InputFileError(f"cannot open the database {source!r}: {exc}") from exc
-    else:
-        path = Path(source)
-        if not path.is_file():
-            raise InputFileError(f"store {path} does not exist")
-        from demtrack.server.store.database import Store
-
-        store = Store(path)
+    if "://" not in source and not Path(source).is_file():
+        raise InputFileError(f"store {source} does not exist")
+    store = open_store(source)
     try:
         yield store
     finally:

@@ -31,10 +31,11 @@ def small_archive(site12_dir: Path, tmp_path_factory: pytest.TempPathFactory) ->
 
 def _run_reprocess(site: Path, archive: Path, out: Path, **kw: object) -> dict:
     settings = ReprocessSettings(**{"method": "multi-hypothesis-road", **kw})  # type: ignore[arg-type]
-    return reprocess(
-        str(site), archive, out, settings,
-        write_tracks=lambda tracks, path: write_track_file(site_at(str(site)), tracks, path),
-    )  # fmt: skip
+
+    def write(tracks: list, path: Path) -> None:
+        write_track_file(site_at(str(site)), tracks, path, batch_geodetic=True)
+
+    return reprocess(str(site), archive, out, settings, write_tracks=write)
 
 
 @pytest.fixture(scope="session")

@@ -153,3 +153,19 @@ def test_mistakes_are_input_errors(tmp_path):
         write_archive(
             pa.table({n: [] for n in ARCHIVE_SCHEMA.names}, schema=ARCHIVE_SCHEMA), tmp_path / "arc"
         )
+
+
+def test_postgres_store_export_round_trip(postgres_url, tmp_path):
+    from demtrack.server.store.opening import open_store
+
+    dets = _detections(90)
+    store = open_store(postgres_url)
+    try:
+        store.insert_batch(dets, {"n_records": 90, "accepted": 90}, None)
+        stored = dict(store.detections(limit=10_000))
+    finally:
+        store.close()
+    assert export_store(postgres_url, tmp_path / "arc") == len(dets)
+    back = read_archive(tmp_path / "arc", SIZES).table
+    assert dict(zip(back["seq"].to_pylist(), detections_of(back)[0], strict=True)) == stored
+    assert read_archive(postgres_url, SIZES).table.equals(back)

@@ -33,17 +33,20 @@ def test_dask_two_workers_same_hash(
 def test_dask_four_workers_shuffled_same_hash(
     site12_dir, small_archive, local_manifest, run_reprocess, tmp_path
 ):
+    # 20 s windows: the tracker's state crosses from task to task (and worker to worker)
     got = run_reprocess(
-        site12_dir, small_archive, tmp_path / "d4", engine="dask", workers=4, shuffle_seed=7
-    )
+        site12_dir, small_archive, tmp_path / "d4", engine="dask", workers=4, shuffle_seed=7,
+        window_s=20.0,
+    )  # fmt: skip
     assert got["run"]["workers"] == 4
+    assert got["n_jobs"] > local_manifest["n_jobs"]
     assert got["content_hash"] == local_manifest["content_hash"]
 
 
 def test_dask_worker_killed_mid_run_same_hash(
     site12_dir, small_archive, local_manifest, run_reprocess, tmp_path
 ):
-    n_tasks = local_manifest["n_parts"] + local_manifest["n_segments"]
+    n_tasks = local_manifest["n_parts"] + local_manifest["n_jobs"]
     got = run_reprocess(
         site12_dir, small_archive, tmp_path / "dk", engine="dask", workers=2, shuffle_seed=3,
         kill_after=n_tasks // 3,

@@ -77,3 +77,7 @@ def test_archive_export_mistakes(tmp_path, capsys):
         == 2
     )
     assert "does not exist" in capsys.readouterr().err
+    url = "postgresql://demtrack:secret@127.0.0.1:9/none"
+    assert main(["archive", "export", "--database-url", url, "-o", str(tmp_path / "a")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cannot be used" in err[0] and "secret" not in err[0]
