@@ -215,7 +215,9 @@ class TiledRayCaster:
             # waiting for the others stay suspended until a later round loads theirs.
             blocks, votes = np.unique(need[waiting], return_counts=True)
             chosen = blocks[np.argsort(-votes, kind="stable")[: c.n_slots]]
-            c.load(chosen, self._round)
+            # Read in row-major order: a block's window spans up to nine file tiles, which
+            # its neighbours share, so GDAL's block cache serves most of them.
+            c.load(np.sort(chosen), self._round)
             rays = waiting[np.isin(need[waiting], chosen)].astype(np.int64)
         walked = phase == 2
         c.stats.visits += int(ist[walked, 6].sum())
