@@ -151,8 +151,8 @@ class TileCache:
         # window spans up to nine file tiles, and GDAL decodes whole tiles.
         if self._pool is None:  # kept: each reader thread opens the file once
             self._pool = ThreadPoolExecutor(READ_THREADS, thread_name_prefix="tile-read")
-        list(self._pool.map(lambda p: self._read_own(*p), pairs))
-        shapes = list(self._pool.map(lambda p: self._read_edges(*p, owners), pairs))
+        list(self._pool.map(lambda p: self._read_own(p[0], p[1]), pairs))
+        shapes = list(self._pool.map(lambda p: self._read_edges(p[0], p[1], owners), pairs))
         for (b, s), shape in zip(pairs, shapes, strict=True):
             self._build_levels(s, shape)
             self._block_of[s] = b
