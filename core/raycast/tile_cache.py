@@ -14,6 +14,7 @@ thread); the pyramids are built on the calling thread.
 
 from __future__ import annotations
 
+import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -21,6 +22,7 @@ import numpy as np
 
 from ..errors import DemError, RaycastError
 from ..terrain.tiled_dem import TiledDem
+from .cast import _threads_for
 from .pyramid import build_pyramid
 
 __all__ = ["CacheStats", "TileCache", "slot_bytes"]
@@ -60,12 +62,18 @@ class CacheStats:
         Times a ray's walk entered a block below the coarse levels.
     misses : int
         Of those, the times the block was not resident (the ray waited for a load).
+    load_s : float
+        Wall-clock seconds spent loading blocks (reading, decoding, building levels).
+    rounds : int
+        Kernel launches (each resumes the rays whose blocks were just loaded).
     """
 
     loads: int = 0
     evictions: int = 0
     visits: int = 0
     misses: int = 0
+    load_s: float = 0.0
+    rounds: int = 0
 
     @property
     def hits(self) -> int:
@@ -121,6 +129,7 @@ class TileCache:
         Slots are taken free first, then from the blocks used longest ago (their
         ``stamp``, set by the kernel), never from the ones being loaded.
         """
+        t0 = time.perf_counter()
         blocks = np.asarray(blocks, np.int64)
         nbx = self.tile_slot.shape[1]
         todo = [int(b) for b in blocks if self.tile_slot[b // nbx, b % nbx] < 0]
@@ -159,6 +168,7 @@ class TileCache:
             self.stamp[s] = now
             self.tile_slot[b // nbx, b % nbx] = s
         self.stats.loads += len(pairs)
+        self.stats.load_s += time.perf_counter() - t0
 
     def _read_own(self, block: int, slot: int) -> None:
         """The cells block ``block`` owns (its file tile) into ``slot``; the rest NaN."""
@@ -231,7 +241,10 @@ class TileCache:
             return
         cells = self.pool_elev[slot, 1 : 1 + shape[0], 1 : 1 + shape[1]]
         try:
-            pyr = build_pyramid(cells)
+            # One block is a millisecond of work on one thread; waking numba's pool for it
+            # cost 100-200 ms a block on the loaded two-core machine.
+            with _threads_for(0):
+                pyr = build_pyramid(cells)
         except DemError:  # every cell a hole: nothing can be hit, nothing skipped
             nodes[:, 0] = np.inf
             nodes[:, 1] = -np.inf
