@@ -30,7 +30,7 @@ from ..errors import RaycastError
 from ..terrain.tiled_dem import TiledDem
 from . import _hit_kernels as _hk
 from . import _tiled_walk_kernels as _tk
-from .cast import HEIGHT_MARGIN_M, _validate_rays
+from .cast import HEIGHT_MARGIN_M, _threads_for, _validate_rays
 from .hits import RayHits
 from .pyramid import pyramid_level_shapes, pyramid_levels_above
 from .tile_cache import CacheStats, TileCache
@@ -139,7 +139,8 @@ class TiledRayCaster:
         first = mode == "first"
         max_hits = 1 if first else int(max_hits)
         cap = 1 if first else min(FIRST_PASS_HITS, max_hits)
-        return self._cast(o, d, rng, first, max_hits, cap)
+        with _threads_for(len(o)):
+            return self._cast(o, d, rng, first, max_hits, cap)
 
     def _cast(
         self,
@@ -197,17 +198,14 @@ class TiledRayCaster:
         status = np.empty(n, np.int8)
         crossed = np.zeros(n, bool)
         truncated = np.zeros(n, bool)
-        c, g, dem = self.cache, self.grid, self.dem
+        c = self.cache
+        outs = (buf, counts, status, crossed, truncated)
         rays = np.arange(n, dtype=np.int64)
         while len(rays):
             self._round += 1
-            _tk.tiled_cast_kernel(
-                g.nrows, g.ncols, c.tile_level, self.block_max, c.tile_slot, c.pool_elev,
-                c.pool_nodes, c.local_off, self.coarse, self.coarse_off, self.lvl_shape,
-                dem.holes, float(g.x_min), float(g.y_max), float(g.cell_m), dem.z_min,
-                dem.z_max, HEIGHT_MARGIN_M, o, d, rng, first, max_hits, rays, self._round,
-                phase, geo, fst, ist, need, c.stamp, buf, counts, status, crossed, truncated,
-            )  # fmt: skip
+            c.stats.rounds += 1
+            with _threads_for(len(rays)):  # a few rays: on this thread (as RayCaster)
+                self._launch(o, d, rng, first, max_hits, rays, phase, geo, fst, ist, need, outs)
             waiting = np.flatnonzero(need >= 0)
             if not len(waiting):
                 break
@@ -215,9 +213,37 @@ class TiledRayCaster:
             # waiting for the others stay suspended until a later round loads theirs.
             blocks, votes = np.unique(need[waiting], return_counts=True)
             chosen = blocks[np.argsort(-votes, kind="stable")[: c.n_slots]]
-            c.load(chosen, self._round)
+            # Read in row-major order: a block's window spans up to nine file tiles, which
+            # its neighbours share, so GDAL's block cache serves most of them.
+            c.load(np.sort(chosen), self._round)
             rays = waiting[np.isin(need[waiting], chosen)].astype(np.int64)
         walked = phase == 2
         c.stats.visits += int(ist[walked, 6].sum())
         c.stats.misses += int(ist[walked, 7].sum())
         return buf, counts, status, crossed, truncated
+
+    def _launch(
+        self,
+        o: np.ndarray,
+        d: np.ndarray,
+        rng: np.ndarray,
+        first: bool,
+        max_hits: int,
+        rays: np.ndarray,
+        phase: np.ndarray,
+        geo: np.ndarray,
+        fst: np.ndarray,
+        ist: np.ndarray,
+        need: np.ndarray,
+        outs: tuple[np.ndarray, ...],
+    ) -> None:
+        """One round of the kernel over ``rays`` with the cache as it stands."""
+        c, g, dem = self.cache, self.grid, self.dem
+        buf, counts, status, crossed, truncated = outs
+        _tk.tiled_cast_kernel(
+            g.nrows, g.ncols, c.tile_level, self.block_max, c.tile_slot, c.pool_elev,
+            c.pool_nodes, c.local_off, self.coarse, self.coarse_off, self.lvl_shape,
+            dem.holes, float(g.x_min), float(g.y_max), float(g.cell_m), dem.z_min,
+            dem.z_max, HEIGHT_MARGIN_M, o, d, rng, first, max_hits, rays, self._round,
+            phase, geo, fst, ist, need, c.stamp, buf, counts, status, crossed, truncated,
+        )  # fmt: skip

@@ -182,3 +182,15 @@ def test_bad_budget_and_rays_are_one_line_errors(tiled: Path) -> None:
         tc.cast(np.zeros((2, 2)), np.zeros((2, 2)))
     with pytest.raises(RaycastError, match="mode"):
         tc.cast(np.zeros((1, 3)), np.ones((1, 3)), mode="most")  # type: ignore[arg-type]
+
+
+def test_a_dem_without_holes_reads_no_halo(tmp_path: Path) -> None:
+    """Without holes only the next row and column are read, from resident neighbours."""
+    dem = _terrain(holes=False)
+    path = tmp_path / "t.tif"
+    write_dem_tiled(dem, path, tile=TILE)
+    tc = _tiled(path, blocks=40)
+    o, d = _random_rays(2500, 5)
+    want = RayCaster.from_dem(SimpleNamespace(grid=dem.grid, elevation=dem.elevation))
+    assert_identical_hits(tc.cast(o, d), want.cast(o, d, coherent=False))
+    assert not tc.dem.holes and tc.stats.loads > 40  # evictions, refills of edges
