@@ -178,7 +178,7 @@ def write_track_file(
     known: dict[tuple[float, float, float], tuple[float, float, float]] = {}
     if batch_geodetic:
         for t in tracks:
-            enu = [tuple(float(c) for c in p.p_enu) for p in t.points]
+            enu = [(float(p.p_enu[0]), float(p.p_enu[1]), float(p.p_enu[2])) for p in t.points]
             if enu:
                 e, n, u = zip(*enu, strict=True)
                 lat, lon, h = (np.atleast_1d(a).tolist() for a in frame.to_geodetic(e, n, u))
