@@ -25,8 +25,8 @@ __all__ = ["main"]
 
 
 def _write(site_dir: str):  # noqa: ANN202  (the reprocess writer of this site)
-    from demtrack.commands.track import write_track_file
     from demtrack.reprocess.tasks import site_at
+    from demtrack.server.track_export import write_track_file
 
     return lambda tracks, path: write_track_file(
         site_at(site_dir), tracks, path, batch_geodetic=True

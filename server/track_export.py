@@ -21,17 +21,21 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from datetime import datetime, timedelta
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from demtrack.core.errors import InputFileError
 from demtrack.core.io.times import parse_iso_time
 from demtrack.core.io.track_io import (
+    TRACK_CSVT,
     TRACK_FORMATS,
     UNIX_EPOCH,
     HeightModel,
     TimeBase,
     track_file_bytes,
+    write_tracks,
 )
 from demtrack.core.tracking.types import Track, TrackPoint
 
@@ -44,6 +48,7 @@ __all__ = [
     "site_heights",
     "time_base",
     "track_from_body",
+    "write_track_file",
 ]
 
 #: Export format -> (media type, file suffix).
@@ -136,3 +141,57 @@ def export_bytes(
     else:
         times = time_base(epoch, t_s=[p["t_s"] for b in bodies for p in b["points"]])
     return track_file_bytes(fmt, tracks, to_geodetic, times=times, heights=heights)
+
+
+#: Track file suffix -> writer format (``demtrack track -o``, ``demtrack reprocess``).
+FILE_FORMATS = {
+    ".geojson": "geojson", ".json": "geojson", ".csv": "csv", ".gpx": "gpx", ".kml": "kml",
+    ".kmz": "kmz", ".gpkg": "gpkg",
+}  # fmt: skip
+
+
+def write_track_file(
+    site: Any,
+    tracks: Sequence[Track],
+    out: Path,
+    epoch: datetime | None = None,
+    *,
+    batch_geodetic: bool = False,
+) -> None:
+    """Write ``tracks`` to ``out`` in its suffix's format (and a ``.csvt`` beside a CSV).
+
+    Heights by :func:`site_heights`; times real UTC when they are UNIX seconds, else
+    relative to ``epoch`` (declared in the file). ``batch_geodetic``: convert each
+    track's points to WGS84 in one call (fast for millions of points; the last bits may
+    differ from one-point calls, numpy's other matrix path, which ``demtrack track``
+    keeps).
+    """
+    fmt = FILE_FORMATS.get(out.suffix.lower())
+    if fmt is None:
+        known = ", ".join(FILE_FORMATS)
+        raise InputFileError(f"unknown track file type {out.suffix.lower()!r} (use {known})")
+    frame = site.frame
+    known_points: dict[tuple[float, ...], tuple[float, float, float]] = {}
+    if batch_geodetic:
+        for t in tracks:
+            enu = [tuple(float(c) for c in p.p_enu) for p in t.points]
+            if enu:
+                e, n, u = zip(*enu, strict=True)
+                lat, lon, h = (np.atleast_1d(a).tolist() for a in frame.to_geodetic(e, n, u))
+                known_points.update(zip(enu, zip(lat, lon, h, strict=True), strict=True))
+
+    def to_geodetic(e: float, n: float, u: float) -> tuple[float, float, float]:
+        got = known_points.get((e, n, u))
+        if got is not None:
+            return got
+        lat, lon, h = frame.to_geodetic(e, n, u)
+        return float(lat), float(lon), float(h)
+
+    # Real UTC when the times are UNIX seconds; session seconds (a declared epoch, or
+    # all before 2000) are said to be relative in the file.
+    times = TimeBase.for_times([p.t_s for t in tracks for p in t.points], epoch)
+    heights = site_heights(site)  # the readout's rule: EGM96, else the site's N, else none
+    write_tracks(fmt, out, tracks, to_geodetic, times=times, heights=heights)
+    if fmt == "csv":
+        # GDAL's column types for the CSV, beside it (ogr reads x.csvt with x.csv).
+        out.with_suffix(".csvt").write_text(TRACK_CSVT, encoding="utf-8")

@@ -23,8 +23,6 @@ from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from demtrack.core.errors import InputFileError
 
 from .choices import DEFAULT_METHOD, TRACKING_METHODS
@@ -35,13 +33,7 @@ if TYPE_CHECKING:
     from demtrack.core.site.folder import Site
     from demtrack.core.tracking import Track
 
-__all__ = [
-    "DEFAULT_METHOD",
-    "check_track_suffix",
-    "register",
-    "track_detections",
-    "write_track_file",
-]
+__all__ = ["DEFAULT_METHOD", "check_track_suffix", "register", "track_detections"]
 
 UNIX_EPOCH_DT = datetime(1970, 1, 1, tzinfo=UTC)
 SUFFIXES = (".geojson", ".json", ".csv", ".gpx", ".kml", ".kmz", ".gpkg")
@@ -120,52 +112,6 @@ def check_track_suffix(out: Path) -> str:
     return suffix
 
 
-def write_track_file(
-    site: Site,
-    tracks: Sequence[Track],
-    out: Path,
-    epoch: datetime | None = None,
-    *,
-    batch_geodetic: bool = False,
-) -> None:
-    """Write ``tracks`` in the format of ``out``'s suffix (and a ``.csvt`` beside a CSV).
-
-    ``batch_geodetic``: convert every track's points to WGS84 in one call per track
-    (fast for millions of points; the last bits may differ from the one-point calls,
-    which are numpy's other matrix path, so ``demtrack track`` keeps those).
-    """
-    from demtrack.core.io.track_io import TRACK_CSVT, TimeBase, write_tracks
-    from demtrack.server.track_export import site_heights
-
-    suffix = check_track_suffix(out)
-    frame = site.frame
-    known: dict[tuple[float, float, float], tuple[float, float, float]] = {}
-    if batch_geodetic:
-        for t in tracks:
-            enu = [tuple(float(c) for c in p.p_enu) for p in t.points]
-            if enu:
-                e, n, u = zip(*enu, strict=True)
-                lat, lon, h = (np.atleast_1d(a).tolist() for a in frame.to_geodetic(e, n, u))
-                known.update(zip(enu, zip(lat, lon, h, strict=True), strict=True))
-
-    def to_geodetic(e: float, n: float, u: float) -> tuple[float, float, float]:
-        got = known.get((e, n, u))
-        if got is not None:
-            return got
-        lat, lon, h = frame.to_geodetic(e, n, u)
-        return float(lat), float(lon), float(h)
-
-    fmt = "geojson" if suffix == ".json" else suffix[1:]
-    # Real UTC when the times are UNIX seconds; session seconds (a declared --epoch, or
-    # all before 2000) are said to be relative in the file.
-    times = TimeBase.for_times([p.t_s for t in tracks for p in t.points], epoch)
-    heights = site_heights(site)  # the server's rule: EGM96, else the site's N, else none
-    write_tracks(fmt, out, tracks, to_geodetic, times=times, heights=heights)
-    if fmt == "csv":
-        # GDAL's column types for the CSV, beside it (ogr reads x.csvt with x.csv).
-        out.with_suffix(".csvt").write_text(TRACK_CSVT, encoding="utf-8")
-
-
 def _run(args: argparse.Namespace) -> int:
     out = Path(args.output)
     check_track_suffix(out)
@@ -174,6 +120,8 @@ def _run(args: argparse.Namespace) -> int:
 
     site = load_site(args.site)
     tracks = track_detections(site, args.detections, args.method, args.poses, args.estimate_latency)
+    from demtrack.server.track_export import write_track_file
+
     write_track_file(site, tracks, out, epoch)
     n_gaps = sum(len(t.gaps) for t in tracks)
     print(f"{args.method}: {len(tracks)} track(s), {n_gaps} gap(s) -> {out}")
