@@ -22,30 +22,27 @@ from __future__ import annotations
 from collections.abc import Sequence
 from datetime import datetime, timedelta
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from demtrack.core.errors import InputFileError
 from demtrack.core.io.times import parse_iso_time
 from demtrack.core.io.track_io import (
+    TRACK_CSVT,
     TRACK_FORMATS,
     UNIX_EPOCH,
     HeightModel,
     TimeBase,
     track_file_bytes,
+    write_tracks,
 )
 from demtrack.core.tracking.types import Track, TrackPoint
 
 from .site_info import sea_level_geoid
 
-if TYPE_CHECKING:
-    from demtrack.core.site.folder import Site
-
 __all__ = [
     "EXPORT_TYPES",
-    "SUFFIXES",
-    "check_track_suffix",
     "export_bytes",
     "parse_epoch",
     "site_heights",
@@ -146,56 +143,54 @@ def export_bytes(
     return track_file_bytes(fmt, tracks, to_geodetic, times=times, heights=heights)
 
 
-SUFFIXES = (".geojson", ".json", ".csv", ".gpx", ".kml", ".kmz", ".gpkg")
-
-
-def check_track_suffix(out: Path) -> str:
-    """The track file's lower-case suffix; an unknown one is an :class:`InputFileError`."""
-    suffix = out.suffix.lower()
-    if suffix not in SUFFIXES:
-        raise InputFileError(f"unknown track file type {suffix!r} (use {', '.join(SUFFIXES)})")
-    return suffix
+#: Track file suffix -> writer format (``demtrack track -o``, ``demtrack reprocess``).
+FILE_FORMATS = {
+    ".geojson": "geojson", ".json": "geojson", ".csv": "csv", ".gpx": "gpx", ".kml": "kml",
+    ".kmz": "kmz", ".gpkg": "gpkg",
+}  # fmt: skip
 
 
 def write_track_file(
-    site: Site,
+    site: Any,
     tracks: Sequence[Track],
     out: Path,
     epoch: datetime | None = None,
     *,
     batch_geodetic: bool = False,
 ) -> None:
-    """Write ``tracks`` in the format of ``out``'s suffix (and a ``.csvt`` beside a CSV).
+    """Write ``tracks`` to ``out`` in its suffix's format (and a ``.csvt`` beside a CSV).
 
-    ``batch_geodetic``: convert every track's points to WGS84 in one call per track
-    (fast for millions of points; the last bits may differ from the one-point calls,
-    which are numpy's other matrix path, so ``demtrack track`` keeps those).
+    Heights by :func:`site_heights`; times real UTC when they are UNIX seconds, else
+    relative to ``epoch`` (declared in the file). ``batch_geodetic``: convert each
+    track's points to WGS84 in one call (fast for millions of points; the last bits may
+    differ from one-point calls, numpy's other matrix path, which ``demtrack track``
+    keeps).
     """
-    from demtrack.core.io.track_io import TRACK_CSVT, TimeBase, write_tracks
-
-    suffix = check_track_suffix(out)
+    fmt = FILE_FORMATS.get(out.suffix.lower())
+    if fmt is None:
+        known = ", ".join(FILE_FORMATS)
+        raise InputFileError(f"unknown track file type {out.suffix.lower()!r} (use {known})")
     frame = site.frame
-    known: dict[tuple[float, float, float], tuple[float, float, float]] = {}
+    known_points: dict[tuple[float, ...], tuple[float, float, float]] = {}
     if batch_geodetic:
         for t in tracks:
-            enu = [(float(p.p_enu[0]), float(p.p_enu[1]), float(p.p_enu[2])) for p in t.points]
+            enu = [tuple(float(c) for c in p.p_enu) for p in t.points]
             if enu:
                 e, n, u = zip(*enu, strict=True)
                 lat, lon, h = (np.atleast_1d(a).tolist() for a in frame.to_geodetic(e, n, u))
-                known.update(zip(enu, zip(lat, lon, h, strict=True), strict=True))
+                known_points.update(zip(enu, zip(lat, lon, h, strict=True), strict=True))
 
     def to_geodetic(e: float, n: float, u: float) -> tuple[float, float, float]:
-        got = known.get((e, n, u))
+        got = known_points.get((e, n, u))
         if got is not None:
             return got
         lat, lon, h = frame.to_geodetic(e, n, u)
         return float(lat), float(lon), float(h)
 
-    fmt = "geojson" if suffix == ".json" else suffix[1:]
-    # Real UTC when the times are UNIX seconds; session seconds (a declared --epoch, or
+    # Real UTC when the times are UNIX seconds; session seconds (a declared epoch, or
     # all before 2000) are said to be relative in the file.
     times = TimeBase.for_times([p.t_s for t in tracks for p in t.points], epoch)
-    heights = site_heights(site)  # the server's rule: EGM96, else the site's N, else none
+    heights = site_heights(site)  # the readout's rule: EGM96, else the site's N, else none
     write_tracks(fmt, out, tracks, to_geodetic, times=times, heights=heights)
     if fmt == "csv":
         # GDAL's column types for the CSV, beside it (ogr reads x.csvt with x.csv).

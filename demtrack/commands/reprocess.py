@@ -20,7 +20,9 @@ __all__ = ["register"]
 def _run(args: argparse.Namespace) -> int:
     from demtrack.reprocess.run import ReprocessSettings, reprocess
     from demtrack.reprocess.tasks import site_at
-    from demtrack.server.track_export import check_track_suffix, write_track_file
+    from demtrack.server.track_export import write_track_file
+
+    from .track import check_track_suffix
 
     tracks_name = f"tracks{args.tracks_format}"
     check_track_suffix(Path(tracks_name))

@@ -33,13 +33,10 @@ if TYPE_CHECKING:
     from demtrack.core.site.folder import Site
     from demtrack.core.tracking import Track
 
-__all__ = [
-    "DEFAULT_METHOD",
-    "register",
-    "track_detections",
-]
+__all__ = ["DEFAULT_METHOD", "check_track_suffix", "register", "track_detections"]
 
 UNIX_EPOCH_DT = datetime(1970, 1, 1, tzinfo=UTC)
+SUFFIXES = (".geojson", ".json", ".csv", ".gpx", ".kml", ".kmz", ".gpkg")
 
 
 def _epoch(text: str | None) -> datetime | None:
@@ -107,16 +104,24 @@ def _with_estimated_latency(
     return replace(site, sensors=sensors)
 
 
+def check_track_suffix(out: Path) -> str:
+    """The track file's lower-case suffix; an unknown one is an :class:`InputFileError`."""
+    suffix = out.suffix.lower()
+    if suffix not in SUFFIXES:
+        raise InputFileError(f"unknown track file type {suffix!r} (use {', '.join(SUFFIXES)})")
+    return suffix
+
+
 def _run(args: argparse.Namespace) -> int:
     out = Path(args.output)
-    from demtrack.server.track_export import check_track_suffix, write_track_file
-
     check_track_suffix(out)
     epoch = _epoch(args.epoch)
     from demtrack.core.site.folder import load_site
 
     site = load_site(args.site)
     tracks = track_detections(site, args.detections, args.method, args.poses, args.estimate_latency)
+    from demtrack.server.track_export import write_track_file
+
     write_track_file(site, tracks, out, epoch)
     n_gaps = sum(len(t.gaps) for t in tracks)
     print(f"{args.method}: {len(tracks)} track(s), {n_gaps} gap(s) -> {out}")

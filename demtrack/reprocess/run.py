@@ -100,13 +100,14 @@ def reprocess(
     out_dir: str | os.PathLike[str],
     settings: ReprocessSettings,
     *,
-    write_tracks: Callable[[Sequence[Track], Path], None],
+    write_tracks: Callable[[Sequence[Track], Path], None] | None = None,
     tracks_name: str = "tracks.geojson",
 ) -> dict[str, Any]:
     """Reprocess ``archive`` on the site into ``out_dir``; returns the manifest.
 
-    ``write_tracks(tracks, path)`` writes the tracks file (the CLI passes
-    ``demtrack track``'s writer, :func:`demtrack.server.track_export.write_track_file`).
+    ``write_tracks(tracks, path)`` writes the tracks file (default:
+    :func:`demtrack.server.track_export.write_track_file`, ``demtrack track``'s writers,
+    each track's points converted to WGS84 in one call).
     """
     site_dir = os.fspath(site_dir)
     t0 = time.perf_counter()
@@ -114,6 +115,16 @@ def reprocess(
     t_plan = time.perf_counter() - t0
     result, run = _execute(plan, read, site_dir, settings)
     t_run = time.perf_counter() - t0 - t_plan
+    if write_tracks is None:
+        from demtrack.server.track_export import write_track_file
+
+        from .tasks import site_at
+
+        site = site_at(site_dir)
+
+        def write_tracks(tracks: Sequence[Track], path: Path) -> None:
+            write_track_file(site, tracks, path, batch_geodetic=True)
+
     info = {
         "method": settings.method,
         "archive": os.fspath(archive),

@@ -7,8 +7,6 @@ from pathlib import Path
 import pytest
 
 from demtrack.reprocess.run import ReprocessSettings, reprocess
-from demtrack.reprocess.tasks import site_at
-from demtrack.server.track_export import write_track_file
 
 
 @pytest.fixture(scope="session")
@@ -31,16 +29,12 @@ def small_archive(site12_dir: Path, tmp_path_factory: pytest.TempPathFactory) ->
 
 def _run_reprocess(site: Path, archive: Path, out: Path, **kw: object) -> dict:
     settings = ReprocessSettings(**{"method": "multi-hypothesis-road", **kw})  # type: ignore[arg-type]
-
-    def write(tracks: list, path: Path) -> None:
-        write_track_file(site_at(str(site)), tracks, path, batch_geodetic=True)
-
-    return reprocess(str(site), archive, out, settings, write_tracks=write)
+    return reprocess(str(site), archive, out, settings)
 
 
 @pytest.fixture(scope="session")
 def run_reprocess():
-    """``run(site, archive, out, **settings)``: reprocess with the CLI's track writer."""
+    """``run(site, archive, out, **settings)``: reprocess; returns the manifest."""
     return _run_reprocess
 
 
