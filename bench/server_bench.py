@@ -259,7 +259,8 @@ def _measure(
         server_url = None if pg is None else stack.enter_context(pg())
         out: dict[str, Any] = {"durable": _durable_only(site, batches, durable_url)}
         name = "sqlite" if pg is None else "postgres"
-        proc, url = _start_server(site, tmp / f"bench-{name}.sqlite3", server_url)
+        db = Path(tempfile.mkdtemp(dir=tmp)) / f"bench-{name}.sqlite3"  # fresh every round
+        proc, url = _start_server(site, db, server_url)
         try:
             out["wall"], out["accepted"] = _ingest(url, batches)
             before = _status_counts(url)
@@ -294,6 +295,15 @@ def _print_ingest(m: dict[str, Any], label: str) -> None:
     )
 
 
+def _ratios(pg: dict[str, Any], lite: dict[str, Any]) -> tuple[float, float, float]:
+    """PostgreSQL's rates over SQLite's: gateway batches, frame batches, durable only."""
+    return (
+        pg["rate"] / lite["rate"],
+        pg["f_rate"] / lite["f_rate"],
+        pg["durable"] / lite["durable"],
+    )
+
+
 def _postgres(args: argparse.Namespace, stack: contextlib.ExitStack, tmp: Path) -> Any:
     """A factory of fresh database URLs on ``--database-url``'s server or a temporary one."""
     from .pg_temp import fresh_database, temp_server
@@ -322,6 +332,13 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="as --database-url, on a throw-away PostgreSQL server of its own",
     )
+    p.add_argument(
+        "--rounds",
+        type=int,
+        default=1,
+        help="with PostgreSQL: measure both this many times, alternating which goes first,"
+        " and print each round's ratios and their median (a loaded machine drifts)",
+    )
     args = p.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp_name, contextlib.ExitStack() as stack:
         tmp = Path(tmp_name)
@@ -340,18 +357,32 @@ def main(argv: list[str] | None = None) -> int:
 
         lite = _measure(site, tmp, batches, frames, fan_out=fan_out)
         pg = None
+        ratios: list[tuple[float, float, float]] = []
         if args.database_url or args.postgres:
-            pg = _measure(site, tmp, batches, frames, _postgres(args, stack, tmp))
+            fresh = _postgres(args, stack, tmp)
+            pg = _measure(site, tmp, batches, frames, fresh)
+            ratios.append(_ratios(pg, lite))
+            for k in range(1, args.rounds):  # alternate which goes first: load drifts
+                first, second = (fresh, None) if k % 2 else (None, fresh)
+                a = _measure(site, tmp, batches, frames, first)
+                b = _measure(site, tmp, batches, frames, second)
+                ratios.append(_ratios(a, b) if k % 2 else _ratios(b, a))
     lat, acks = lite["fan_out"]
     cpus = os.cpu_count()
     print(f"demtrack bench server: {len(recs)} detections in batches of {args.batch}, {cpus} CPUs")
     _print_ingest(lite, "sqlite")
     if pg is not None:
         _print_ingest(pg, "postgres")
+        for k, (g, f, d) in enumerate(ratios):
+            print(
+                f"  PostgreSQL / SQLite, round {k + 1} (same input): gateway batches {g:.2f},"
+                f" frame batches {f:.2f}, durable storage only {d:.2f}"
+            )
+        med = np.median(np.array(ratios), axis=0)
         print(
-            "  PostgreSQL / SQLite, same run, same input: gateway batches"
-            f" {pg['rate'] / lite['rate']:.2f}, frame batches {pg['f_rate'] / lite['f_rate']:.2f},"
-            f" durable storage only {pg['durable'] / lite['durable']:.2f} (bar: at least 0.5)"
+            f"  PostgreSQL / SQLite, median of {len(ratios)} round(s): gateway batches"
+            f" {med[0]:.2f}, frame batches {med[1]:.2f}, durable storage only {med[2]:.2f}"
+            " (bar: at least 0.5)"
         )
     if len(lat):
         med, p95 = (1000 * float(np.percentile(lat, q)) for q in (50, 95))
