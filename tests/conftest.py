@@ -106,7 +106,7 @@ def postgres_cluster(tmp_path_factory: pytest.TempPathFactory):
     """
     import os
 
-    from tests.postgres_cluster import PostgresCluster, find_pg_bin
+    from postgres_cluster import PostgresCluster, find_pg_bin  # tests/ is on sys.path
 
     if find_pg_bin() is None:
         if os.environ.get("CI"):
