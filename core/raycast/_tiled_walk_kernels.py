@@ -28,7 +28,18 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ._walk_kernels import BELOW_GROUND, HIT, MISS, OUTSIDE, UPWARD, _solve_patch, keep_root
+from ._walk_kernels import (
+    BELOW_GROUND,
+    HIT,
+    MISS,
+    OUTSIDE,
+    UPWARD,
+    _solve_patch,
+    bilinear,
+    clip_to_hull,
+    clip_to_slab,
+    keep_root,
+)
 
 __all__ = ["NEED", "tiled_cast_kernel"]
 
@@ -104,33 +115,11 @@ def _prepare(
     block's coarse max decides first whether that read can matter (an origin at or above
     its block's max is above every node in it), so a block is loaded only when it must be.
     """
-    norm = math.sqrt(dx * dx + dy * dy + dz * dz)
-    ux = dx / norm
-    uy = dy / norm
-    uz = dz / norm
-    kx = ux / cell
-    ky = -uy / cell
-    gx0 = (ox - x_min) / cell - 0.5
-    gy0 = (y_max - oy) / cell - 0.5
     gxmax = ncols - 1.0
     gymax = nrows - 1.0
-
-    t_lo = 0.0
-    t_hi = max_range
-    if kx != 0.0:
-        t1 = (0.0 - gx0) / kx
-        t2 = (gxmax - gx0) / kx
-        t_lo = max(t_lo, min(t1, t2))
-        t_hi = min(t_hi, max(t1, t2))
-    elif gx0 < 0.0 or gx0 > gxmax:
-        t_hi = -1.0
-    if ky != 0.0:
-        t1 = (0.0 - gy0) / ky
-        t2 = (gymax - gy0) / ky
-        t_lo = max(t_lo, min(t1, t2))
-        t_hi = min(t_hi, max(t1, t2))
-    elif gy0 < 0.0 or gy0 > gymax:
-        t_hi = -1.0
+    gx0, gy0, kx, ky, uz, t_lo, t_hi = clip_to_hull(
+        nrows, ncols, x_min, y_max, cell, ox, oy, dx, dy, dz, max_range
+    )
     if not (t_lo <= t_hi):
         return OUTSIDE, gx0, gy0, kx, ky, uz, 0.0, 0.0
 
@@ -168,26 +157,10 @@ def _prepare(
                 e10 = pe[ly + 1, lx]
                 e11 = pe[ly + 1, lx + 1]
                 if e00 == e00 and e01 == e01 and e10 == e10 and e11 == e11:
-                    s = gx0 - ix
-                    t = gy0 - iy
-                    h = (
-                        e00 * (1.0 - s) * (1.0 - t)
-                        + e01 * s * (1.0 - t)
-                        + e10 * (1.0 - s) * t
-                        + e11 * s * t
-                    )
-                    if oz < h:
+                    if oz < bilinear(e00, e01, e10, e11, gx0 - ix, gy0 - iy):
                         return BELOW_GROUND, gx0, gy0, kx, ky, uz, 0.0, 0.0
 
-    zlo = z_min - margin
-    zhi = z_max + margin
-    if uz != 0.0:
-        t1 = (zlo - oz) / uz
-        t2 = (zhi - oz) / uz
-        t_lo = max(t_lo, min(t1, t2))
-        t_hi = min(t_hi, max(t1, t2))
-    elif oz < zlo or oz > zhi:
-        t_hi = -1.0
+    t_lo, t_hi = clip_to_slab(t_lo, t_hi, oz, uz, z_min - margin, z_max + margin)
     if not (t_lo <= t_hi):
         return MISS, gx0, gy0, kx, ky, uz, 0.0, 0.0
     return HIT, gx0, gy0, kx, ky, uz, t_lo, t_hi

@@ -77,6 +77,64 @@ DEDUPE_M = 1e-5
 #: Side (cells, as a power of two) of the origin tiles :func:`ray_order_kernel` bins by.
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def clip_to_hull(
+    nrows, ncols, x_min, y_max, cell, ox, oy, dx, dy, dz, max_range
+):  # pragma: no cover
+    """A ray's grid set-up and its range over the hull of cell centres, within [0, max_range].
+
+    Returns ``(gx0, gy0, kx, ky, uz, t_lo, t_hi)``: the origin in grid coordinates, the unit
+    direction's grid rates, and the range (empty when ``t_lo > t_hi``). Shared by the
+    in-memory and the tiled set-ups, so both clip to the bit alike.
+    """
+    norm = math.sqrt(dx * dx + dy * dy + dz * dz)
+    ux = dx / norm
+    uy = dy / norm
+    uz = dz / norm
+    kx = ux / cell
+    ky = -uy / cell
+    gx0 = (ox - x_min) / cell - 0.5
+    gy0 = (y_max - oy) / cell - 0.5
+    gxmax = ncols - 1.0
+    gymax = nrows - 1.0
+    t_lo = 0.0
+    t_hi = max_range
+    if kx != 0.0:
+        t1 = (0.0 - gx0) / kx
+        t2 = (gxmax - gx0) / kx
+        t_lo = max(t_lo, min(t1, t2))
+        t_hi = min(t_hi, max(t1, t2))
+    elif gx0 < 0.0 or gx0 > gxmax:
+        t_hi = -1.0
+    if ky != 0.0:
+        t1 = (0.0 - gy0) / ky
+        t2 = (gymax - gy0) / ky
+        t_lo = max(t_lo, min(t1, t2))
+        t_hi = min(t_hi, max(t1, t2))
+    elif gy0 < 0.0 or gy0 > gymax:
+        t_hi = -1.0
+    return gx0, gy0, kx, ky, uz, t_lo, t_hi
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def bilinear(e00, e01, e10, e11, s, t):  # pragma: no cover - numba
+    """The surface's height at ``(s, t)`` in a patch of corner heights ``e00 .. e11``."""
+    return e00 * (1.0 - s) * (1.0 - t) + e01 * s * (1.0 - t) + e10 * (1.0 - s) * t + e11 * s * t
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def clip_to_slab(t_lo, t_hi, oz, uz, zlo, zhi):  # pragma: no cover - numba
+    """``[t_lo, t_hi]`` narrowed to where the ray lies between heights ``zlo`` and ``zhi``."""
+    if uz != 0.0:
+        t1 = (zlo - oz) / uz
+        t2 = (zhi - oz) / uz
+        t_lo = max(t_lo, min(t1, t2))
+        t_hi = min(t_hi, max(t1, t2))
+    elif oz < zlo or oz > zhi:
+        t_hi = -1.0
+    return t_lo, t_hi
+
+
 # Not inlined (numba's default): called once per ray, so a call costs nothing measurable
 # (demtrack bench raycast: same rays/s), while inlining it into every casting kernel made
 # the cold compile of ``cast_kernel`` about 7 s of CPU longer.
@@ -105,34 +163,11 @@ def _prepare(
     ``status == HIT`` means "walk it" (it may still end as MISS).
     """
     nrows, ncols = elev.shape
-    norm = math.sqrt(dx * dx + dy * dy + dz * dz)
-    ux = dx / norm
-    uy = dy / norm
-    uz = dz / norm
-    kx = ux / cell
-    ky = -uy / cell
-    gx0 = (ox - x_min) / cell - 0.5
-    gy0 = (y_max - oy) / cell - 0.5
     gxmax = ncols - 1.0
     gymax = nrows - 1.0
-
-    # Footprint against the hull of cell centres, within [0, max_range].
-    t_lo = 0.0
-    t_hi = max_range
-    if kx != 0.0:
-        t1 = (0.0 - gx0) / kx
-        t2 = (gxmax - gx0) / kx
-        t_lo = max(t_lo, min(t1, t2))
-        t_hi = min(t_hi, max(t1, t2))
-    elif gx0 < 0.0 or gx0 > gxmax:
-        t_hi = -1.0
-    if ky != 0.0:
-        t1 = (0.0 - gy0) / ky
-        t2 = (gymax - gy0) / ky
-        t_lo = max(t_lo, min(t1, t2))
-        t_hi = min(t_hi, max(t1, t2))
-    elif gy0 < 0.0 or gy0 > gymax:
-        t_hi = -1.0
+    gx0, gy0, kx, ky, uz, t_lo, t_hi = clip_to_hull(
+        nrows, ncols, x_min, y_max, cell, ox, oy, dx, dy, dz, max_range
+    )
     if not (t_lo <= t_hi):
         return OUTSIDE, gx0, gy0, kx, ky, uz, 0.0, 0.0
 
@@ -153,27 +188,11 @@ def _prepare(
             e10 = elev[iy + 1, ix]
             e11 = elev[iy + 1, ix + 1]
             if e00 == e00 and e01 == e01 and e10 == e10 and e11 == e11:
-                s = gx0 - ix
-                t = gy0 - iy
-                h = (
-                    e00 * (1.0 - s) * (1.0 - t)
-                    + e01 * s * (1.0 - t)
-                    + e10 * (1.0 - s) * t
-                    + e11 * s * t
-                )
-                if oz < h:
+                if oz < bilinear(e00, e01, e10, e11, gx0 - ix, gy0 - iy):
                     return BELOW_GROUND, gx0, gy0, kx, ky, uz, 0.0, 0.0
 
     # Height slab of the terrain, with a margin so a roof at exactly z_max is inside.
-    zlo = z_min - margin
-    zhi = z_max + margin
-    if uz != 0.0:
-        t1 = (zlo - oz) / uz
-        t2 = (zhi - oz) / uz
-        t_lo = max(t_lo, min(t1, t2))
-        t_hi = min(t_hi, max(t1, t2))
-    elif oz < zlo or oz > zhi:
-        t_hi = -1.0
+    t_lo, t_hi = clip_to_slab(t_lo, t_hi, oz, uz, z_min - margin, z_max + margin)
     if not (t_lo <= t_hi):
         return MISS, gx0, gy0, kx, ky, uz, 0.0, 0.0
     return HIT, gx0, gy0, kx, ky, uz, t_lo, t_hi
