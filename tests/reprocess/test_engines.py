@@ -25,8 +25,16 @@ def test_local_run_is_deterministic(
 def test_dask_two_workers_same_hash(
     site12_dir, small_archive, local_manifest, run_reprocess, tmp_path
 ):
-    got = run_reprocess(site12_dir, small_archive, tmp_path / "d2", engine="dask", workers=2)
+    # a running cluster, reached as --scheduler reaches one (the others start their own)
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster:
+        got = run_reprocess(
+            site12_dir, small_archive, tmp_path / "d2", engine="dask",
+            scheduler=cluster.scheduler_address,
+        )  # fmt: skip
     assert got["run"]["workers"] == 2
+    assert got["run"]["scheduler"].startswith("tcp://")
     assert got["content_hash"] == local_manifest["content_hash"]
 
 
