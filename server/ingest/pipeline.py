@@ -40,7 +40,7 @@ from ..store.integrity import StoreUnavailableError
 from .events import event_message, ingest_message
 from .fix_codec import fix_bodies, fixes_from_bodies
 from .group_commit import Ack, GroupCommit, Request, commit_group
-from .pose_book import WINDOW_S, PoseBook, geolocate_posed
+from .pose_book import WINDOW_S, PoseBook, geolocate_posed, sample_from_body
 from .pose_stream import PoseAnnouncer
 from .pose_values import ParsedPoses
 from .publish import Publisher, sensor_status_messages, store_and_publish
@@ -267,10 +267,13 @@ class Pipeline:
         """
         n = 0
         while self.tracking and self.tail_after is not None:
+            posed = self._catch_up_poses()
             rows = self.store.detections(self.tail_after, CATCH_UP_CHUNK, unprocessed=True)
             if below is not None:
                 rows = [r for r in rows if r[0] < below]
             if not rows:
+                if posed:  # poses alone: release what waited for them, announce them
+                    self._process([], posed=posed)
                 break
             self.tail_after = rows[-1][0]
             for i, d in rows:  # counted here as this process counts its own batches
@@ -278,9 +281,32 @@ class Pipeline:
                     continue
                 self._last_t[d.sensor] = max(d.t_s, self._last_t.get(d.sensor, d.t_s))
                 self._n_det[d.sensor] = self._n_det.get(d.sensor, 0) + 1
-            self._process(rows)
+            self._process(rows, posed=posed)
             n += len(rows)
         return n
+
+    def _catch_up_poses(self) -> set[str]:
+        """Poses other processes stored, newer than this one holds, into the series.
+
+        Read before the detections they may pose (a pose batch commits before the
+        detections it covers are sent, as the replays and the heads do). Returns the
+        sensors whose series moved.
+        """
+        moved: set[str] = set()
+        for sensor, newest_t in sorted(self.store.pose_last_times().items()):
+            held = self.pose_book.newest.get(sensor)
+            after = -math.inf if held is None else float(held.t_s)
+            if newest_t <= after:
+                continue
+            t_from = None if held is None else after
+            bodies = self.store.poses(sensor, t_from, newest_t)
+            samples = [sample_from_body(b) for b in bodies if float(b["t_s"]) > after]
+            if samples:
+                self.pose_book.extend(sensor, samples)
+                moved.add(sensor)
+            last = self.pose_book.last_t.get(sensor, -math.inf)
+            self.pose_book.last_t[sensor] = max(last, newest_t)
+        return moved
 
     def _load_ingest_state(self) -> None:
         """Each sensor's newest detection time and count, and the stored poses."""

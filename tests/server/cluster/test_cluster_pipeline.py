@@ -164,3 +164,53 @@ def test_a_group_committed_one_by_one_leaves_no_batch_of_another_process_behind(
         ids = [r[0] for r in c.execute("SELECT id FROM detections ORDER BY id")]
     assert ids == list(range(1, n + 1))
     lease.close()
+
+
+def _rays(store) -> dict[int, tuple[bool, list[float]]]:
+    return {
+        b["detection_id"]: (bool(b["hits"]), b["origin_enu"] + b["direction_enu"])
+        for b in store.fixes(0, 100_000)
+    }
+
+
+def test_poses_a_follower_stored_pose_the_leaders_detections(site, postgres_cluster) -> None:
+    """A PTZ head's telemetry posted to one process, its detections to another.
+
+    Oracle: one pipeline that took both. Before the leader read other processes' poses it
+    geolocated these detections at the head's fixed pose (rays 4 degrees off).
+    """
+    from server_helpers import walk
+
+    from demtrack.core.camera.pose_series import PoseSample
+
+    cam = site.sensors["cam1"]
+    pan, tilt = cam.pan_deg + 4.0, cam.tilt_deg - 1.5
+    poses = [PoseSample(k * 0.1, pan, tilt) for k in range(80)]
+    dets = walk(n=30, t0=0.0, dt=0.2)
+    oracle = _pipeline(site, postgres_cluster.create_database())
+    oracle.start()
+    oracle.ingest_poses("cam1", poses)
+    oracle.ingest(dets)
+    want = _rays(oracle.store)
+
+    url = postgres_cluster.create_database()
+    lease = SiteLease(url)
+    leader, follower = _pipeline(site, url), _pipeline(site, url)
+    token = lease.acquire("s", "leader", 60)
+    assert token is not None
+    leader.lead(SiteLease.fence_check("s", token))
+    follower.follow()
+    assert follower.ingest_poses("cam1", poses)["accepted"] == len(poses)
+    assert follower.ingest(dets)["accepted"] == len(dets)
+    leader.catch_up()
+    got = _rays(leader.store)
+    assert sorted(got) == sorted(want) and len(got) == len(dets)
+    assert [got[k][0] for k in sorted(got)] == [want[k][0] for k in sorted(want)]
+    hit = [k for k in sorted(want) if want[k][0]]
+    assert len(hit) > 20
+    for k in hit:
+        assert got[k][1] == pytest.approx(want[k][1], abs=1e-9)
+    assert leader.pose_book.newest["cam1"].t_s == pytest.approx(poses[-1].t_s)
+    for p in (oracle, leader, follower):
+        p.store.close()
+    lease.close()
