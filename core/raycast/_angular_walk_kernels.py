@@ -21,6 +21,8 @@ from ._walk_kernels import (
     OUTSIDE,
     UPWARD,
     _walk,
+    clip_to_hull,
+    clip_to_slab,
     has_holes,
     keep_root,
     patch_root,
@@ -192,45 +194,14 @@ def _prepare_shared(
     operation, so the clipped stretch is the same to the bit. Returns ``(status, kx,
     ky, uz, t_a, t_end)``.
     """
-    norm = math.sqrt(dx * dx + dy * dy + dz * dz)
-    ux = dx / norm
-    uy = dy / norm
-    uz = dz / norm
-    kx = ux / cell
-    ky = -uy / cell
-    gxmax = ncols - 1.0
-    gymax = nrows - 1.0
-    t_lo = 0.0
-    t_hi = max_range
-    if kx != 0.0:
-        t1 = (0.0 - gx0) / kx
-        t2 = (gxmax - gx0) / kx
-        t_lo = max(t_lo, min(t1, t2))
-        t_hi = min(t_hi, max(t1, t2))
-    elif gx0 < 0.0 or gx0 > gxmax:
-        t_hi = -1.0
-    if ky != 0.0:
-        t1 = (0.0 - gy0) / ky
-        t2 = (gymax - gy0) / ky
-        t_lo = max(t_lo, min(t1, t2))
-        t_hi = min(t_hi, max(t1, t2))
-    elif gy0 < 0.0 or gy0 > gymax:
-        t_hi = -1.0
+    kx, ky, uz, t_lo, t_hi = clip_to_hull(nrows, ncols, gx0, gy0, dx, dy, dz, cell, max_range)
     if not (t_lo <= t_hi):
         return OUTSIDE, kx, ky, uz, 0.0, 0.0
     if uz >= 0.0 and oz >= z_max:
         return UPWARD, kx, ky, uz, 0.0, 0.0
     if below:
         return BELOW_GROUND, kx, ky, uz, 0.0, 0.0
-    zlo = z_min - margin
-    zhi = z_max + margin
-    if uz != 0.0:
-        t1 = (zlo - oz) / uz
-        t2 = (zhi - oz) / uz
-        t_lo = max(t_lo, min(t1, t2))
-        t_hi = min(t_hi, max(t1, t2))
-    elif oz < zlo or oz > zhi:
-        t_hi = -1.0
+    t_lo, t_hi = clip_to_slab(t_lo, t_hi, oz, uz, z_min - margin, z_max + margin)
     if not (t_lo <= t_hi):
         return MISS, kx, ky, uz, 0.0, 0.0
     return HIT, kx, ky, uz, t_lo, t_hi

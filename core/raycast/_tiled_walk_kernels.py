@@ -36,8 +36,10 @@ from ._walk_kernels import (
     UPWARD,
     _solve_patch,
     bilinear,
+    climb_step,
     clip_to_hull,
     clip_to_slab,
+    face_step,
     keep_root,
 )
 
@@ -117,9 +119,9 @@ def _prepare(
     """
     gxmax = ncols - 1.0
     gymax = nrows - 1.0
-    gx0, gy0, kx, ky, uz, t_lo, t_hi = clip_to_hull(
-        nrows, ncols, x_min, y_max, cell, ox, oy, dx, dy, dz, max_range
-    )
+    gx0 = (ox - x_min) / cell - 0.5
+    gy0 = (y_max - oy) / cell - 0.5
+    kx, ky, uz, t_lo, t_hi = clip_to_hull(nrows, ncols, gx0, gy0, dx, dy, dz, cell, max_range)
     if not (t_lo <= t_hi):
         return OUTSIDE, gx0, gy0, kx, ky, uz, 0.0, 0.0
 
@@ -285,25 +287,14 @@ def _walk(
                 break
         if t_exit >= t_end:
             break
-        bx_ = tmx <= tmy
-        t_cur = min(tmx, tmy)
-        nx = nx + sx if bx_ else nx
-        ny = ny if bx_ else ny + sy
-        tmx = tmx + dxl if bx_ else tmx
-        tmy = tmy if bx_ else tmy + dyl
+        nx, ny, tmx, tmy, t_cur, bx_ = face_step(nx, ny, sx, sy, tmx, tmy, dxl, dyl)
         if nx < 0 or nx >= ncl or ny < 0 or ny >= nrl:
             break
         z_cur = z_exit
-        near_x = (nx & 1) != fx
-        near_y = (ny & 1) != fy
-        if (near_x if bx_ else near_y) and level < top:
-            tmx = tmx + dxl if near_x else tmx
-            tmy = tmy + dyl if near_y else tmy
-            nx >>= 1
-            ny >>= 1
-            level += 1
-            dxl *= 2.0
-            dyl *= 2.0
+        nx, ny, level, tmx, tmy, dxl, dyl, climbed = climb_step(
+            nx, ny, fx, fy, bx_, level, top, tmx, tmy, dxl, dyl
+        )
+        if climbed:
             ncl = lvl_shape[level - 1, 1]
             nrl = lvl_shape[level - 1, 0]
     fst[i, 0], fst[i, 1], fst[i, 2], fst[i, 3] = tmx, tmy, dxl, dyl

@@ -78,14 +78,13 @@ DEDUPE_M = 1e-5
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def clip_to_hull(
-    nrows, ncols, x_min, y_max, cell, ox, oy, dx, dy, dz, max_range
-):  # pragma: no cover
-    """A ray's grid set-up and its range over the hull of cell centres, within [0, max_range].
+def clip_to_hull(nrows, ncols, gx0, gy0, dx, dy, dz, cell, max_range):  # pragma: no cover
+    """A ray's grid rates and its range over the hull of cell centres, within [0, max_range].
 
-    Returns ``(gx0, gy0, kx, ky, uz, t_lo, t_hi)``: the origin in grid coordinates, the unit
-    direction's grid rates, and the range (empty when ``t_lo > t_hi``). Shared by the
-    in-memory and the tiled set-ups, so both clip to the bit alike.
+    ``gx0, gy0``: the origin in grid coordinates (``(ox - x_min) / cell - 0.5``, ``(y_max
+    - oy) / cell - 0.5``). Returns ``(kx, ky, uz, t_lo, t_hi)``: the unit direction's
+    grid rates and the range (empty when ``t_lo > t_hi``). Shared by the in-memory, the
+    per-origin (angular) and the tiled set-ups, so all clip to the bit alike.
     """
     norm = math.sqrt(dx * dx + dy * dy + dz * dz)
     ux = dx / norm
@@ -93,8 +92,6 @@ def clip_to_hull(
     uz = dz / norm
     kx = ux / cell
     ky = -uy / cell
-    gx0 = (ox - x_min) / cell - 0.5
-    gy0 = (y_max - oy) / cell - 0.5
     gxmax = ncols - 1.0
     gymax = nrows - 1.0
     t_lo = 0.0
@@ -113,7 +110,7 @@ def clip_to_hull(
         t_hi = min(t_hi, max(t1, t2))
     elif gy0 < 0.0 or gy0 > gymax:
         t_hi = -1.0
-    return gx0, gy0, kx, ky, uz, t_lo, t_hi
+    return kx, ky, uz, t_lo, t_hi
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -165,9 +162,9 @@ def _prepare(
     nrows, ncols = elev.shape
     gxmax = ncols - 1.0
     gymax = nrows - 1.0
-    gx0, gy0, kx, ky, uz, t_lo, t_hi = clip_to_hull(
-        nrows, ncols, x_min, y_max, cell, ox, oy, dx, dy, dz, max_range
-    )
+    gx0 = (ox - x_min) / cell - 0.5
+    gy0 = (y_max - oy) / cell - 0.5
+    kx, ky, uz, t_lo, t_hi = clip_to_hull(nrows, ncols, gx0, gy0, dx, dy, dz, cell, max_range)
     if not (t_lo <= t_hi):
         return OUTSIDE, gx0, gy0, kx, ky, uz, 0.0, 0.0
 
@@ -301,6 +298,38 @@ def keep_root(s, t_cur, t_exit, hits, base, cap, count, last_t):  # pragma: no c
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def face_step(nx, ny, sx, sy, tmx, tmy, dxl, dyl):  # pragma: no cover - numba
+    """One Amanatides-Woo step through the node face crossed first.
+
+    Returns ``(nx, ny, tmx, tmy, t_cur, bx)``: the next node, its face ranges, the range
+    at the face and whether the step was along x.
+    """
+    bx = tmx <= tmy
+    t_cur = min(tmx, tmy)
+    nx = nx + sx if bx else nx
+    ny = ny if bx else ny + sy
+    tmx = tmx + dxl if bx else tmx
+    tmy = tmy if bx else tmy + dyl
+    return nx, ny, tmx, tmy, t_cur, bx
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def climb_step(nx, ny, fx, fy, bx, level, top, tmx, tmy, dxl, dyl):  # pragma: no cover
+    """After a step: climb one level when the ray entered a new parent by its near face.
+
+    The parent's exit along an axis is one child width further when the ray is in the
+    near child along that axis. Returns ``(nx, ny, level, tmx, tmy, dxl, dyl, climbed)``.
+    """
+    near_x = (nx & 1) != fx
+    near_y = (ny & 1) != fy
+    if (near_x if bx else near_y) and level < top:
+        tmx = tmx + dxl if near_x else tmx
+        tmy = tmy + dyl if near_y else tmy
+        return nx >> 1, ny >> 1, level + 1, tmx, tmy, dxl * 2.0, dyl * 2.0, True
+    return nx, ny, level, tmx, tmy, dxl, dyl, False
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def _walk(
     elev,
     nodes,
@@ -417,28 +446,14 @@ def _walk(
         # Nothing (more) in this node: step through the face crossed first.
         if t_exit >= t_end:
             break
-        bx = tmx <= tmy
-        t_cur = min(tmx, tmy)
-        nx = nx + sx if bx else nx
-        ny = ny if bx else ny + sy
-        tmx = tmx + dxl if bx else tmx
-        tmy = tmy if bx else tmy + dyl
+        nx, ny, tmx, tmy, t_cur, bx = face_step(nx, ny, sx, sy, tmx, tmy, dxl, dyl)
         if nx < 0 or nx >= ncl or ny < 0 or ny >= nrl:
             break
         z_cur = z_exit
-        # Entered a new parent through its near face: climb to it, one level. The
-        # parent's exit along an axis is one child width further when the ray is in
-        # the near child along that axis.
-        near_x = (nx & 1) != fx
-        near_y = (ny & 1) != fy
-        if (near_x if bx else near_y) and level < top:
-            tmx = tmx + dxl if near_x else tmx
-            tmy = tmy + dyl if near_y else tmy
-            nx >>= 1
-            ny >>= 1
-            level += 1
-            dxl *= 2.0
-            dyl *= 2.0
+        nx, ny, level, tmx, tmy, dxl, dyl, climbed = climb_step(
+            nx, ny, fx, fy, bx, level, top, tmx, tmy, dxl, dyl
+        )
+        if climbed:
             ncl = lvl_shape[level - 1, 1]
             nrl = lvl_shape[level - 1, 0]
             koff = lvl_off[level - 1]
