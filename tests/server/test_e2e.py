@@ -31,6 +31,20 @@ def records() -> list[dict]:
     return out
 
 
+def _wait_until_tracked(database_url: str, n: int, timeout_s: float = 60.0) -> None:
+    """Wait until ``n`` fixes are stored: on PostgreSQL the restarted server tracks only
+    once it holds the site's lease, when the killed one's has expired (its TTL)."""
+    import psycopg
+
+    deadline = time.monotonic() + timeout_s
+    while True:
+        with psycopg.connect(database_url) as conn:
+            (k,) = conn.execute("SELECT count(*) FROM fixes").fetchone()
+        if k >= n or time.monotonic() > deadline:
+            return
+        time.sleep(0.1)
+
+
 @pytest.mark.parametrize("backend", ["sqlite", "postgres"])
 def test_sigkill_mid_ingest_loses_no_acknowledged_detection(
     backend, sample_site_dir, tmp_path, request
@@ -83,6 +97,8 @@ def test_sigkill_mid_ingest_loses_no_acknowledged_detection(
                 r = c.post("/api/detections", json={"detections": batch, "batch_key": f"b{k}"})
                 assert r.status_code == 200
             stored = c.get("/api/detections", params={"limit": 10000}).json()
+            if backend == "postgres":  # tracked by the lease holder, once it takes over
+                _wait_until_tracked(env["DEMTRACK_DATABASE_URL"], len(recs))
             tracks = c.get("/api/tracks").json()["tracks"]
             seq = c.get("/api/health").json()["last_seq"]
             events = _events(c)
