@@ -293,19 +293,16 @@ class Pipeline:
         sensors whose series moved.
         """
         moved: set[str] = set()
-        for sensor, newest_t in sorted(self.store.pose_last_times().items()):
+        for sensor in sorted(self.site.sensors):  # one range read on (sensor, t_s) each
             held = self.pose_book.newest.get(sensor)
             after = -math.inf if held is None else float(held.t_s)
-            if newest_t <= after:
-                continue
-            t_from = None if held is None else after
-            bodies = self.store.poses(sensor, t_from, newest_t)
+            bodies = self.store.poses(sensor, None if held is None else after)
             samples = [sample_from_body(b) for b in bodies if float(b["t_s"]) > after]
             if samples:
                 self.pose_book.extend(sensor, samples)
                 moved.add(sensor)
-            last = self.pose_book.last_t.get(sensor, -math.inf)
-            self.pose_book.last_t[sensor] = max(last, newest_t)
+                last = self.pose_book.last_t.get(sensor, -math.inf)
+                self.pose_book.last_t[sensor] = max(last, float(samples[-1].t_s))
         return moved
 
     def _load_ingest_state(self) -> None:
