@@ -10,11 +10,12 @@ state, GDAL's block cache) is counted. The peak RSS of the cast (Linux ``VmHWM``
 once the kernels are compiled) is checked against the budget, before any reference is
 built; the process's lifetime peak (``getrusage``, compilation included) is printed too.
 
-References, measured in the same run: each camera's window (its 2.5 km reach) read into a
-plain :class:`~demtrack.core.terrain.dem.Dem` and cast with the in-memory ``RayCaster``
-(``coherent=False``, the same pyramid walk): statuses, hit counts and flags must be equal
-and the hit points agree to rounding (a window has its own grid origin and pyramid, so
-the walk rounds differently, to well under a micrometre). With ``--full-reference``
+References, measured in the same run: each camera's window (the patch blocks of its 2.5 km
+reach) read into memory and cast with the in-memory ``RayCaster`` kernels in the whole DEM's
+frame (:class:`~demtrack.core.raycast.window_cast.WindowRayCaster`: the whole grid's origin
+and height range, the window's cells and pyramid aligned to the file's blocks, the coarse
+levels from its block min/max): offsets, ranges, points, statuses and flags must be equal
+bit for bit. With ``--full-reference``
 (default when the DEM fits in 1 GB; above that its cells go to a raw read-only memmap
 beside the DEM, deleted after) the whole DEM is also cast by the in-memory ``RayCaster``,
 where the answers must be equal bit for bit.
@@ -39,15 +40,13 @@ import psutil
 from demtrack.core.raycast import _hit_kernels as _hk
 from demtrack.core.raycast.cast import RayCaster, RayHits
 from demtrack.core.raycast.tiled_cast import TiledRayCaster
+from demtrack.core.raycast.window_cast import WindowRayCaster
 from demtrack.core.terrain.tiled_dem import GDAL_CACHE_MB, TiledDem
 from demtrack.core.terrain.tiled_write import synth_tiled
 
 __all__ = ["camera_rays", "main"]
 
 RANGE_M = 2500.0
-#: Agreement asked of the windowed casts' hit points (m): a window has its own origin,
-#: height range and pyramid, so its walk rounds differently (grazing rays most).
-WINDOW_TOL_M = 1e-6
 #: Bytes per ray of the tiled cast's state and answer (walk state, first-pass hits, CSR).
 _BYTES_PER_RAY = 600
 
@@ -106,16 +105,6 @@ def camera_rays(
             dirs.append(d1)
             spans.append((lo, lo + len(d1)))
     return np.concatenate(origins), np.concatenate(dirs), spans
-
-
-def _window_of(td: TiledDem, origin: np.ndarray) -> tuple[int, int, int, int]:
-    """Rows and columns of cells within the reach of a camera (plus one cell)."""
-    g = td.grid
-    gx, gy = g.to_grid(origin[0], origin[1])
-    reach = RANGE_M / g.cell_m + 2
-    r0, r1 = max(int(gy - reach), 0), min(int(gy + reach) + 2, g.nrows)
-    c0, c1 = max(int(gx - reach), 0), min(int(gx + reach) + 2, g.ncols)
-    return r0, r1, c0, c1
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -208,31 +197,46 @@ def _run(args: argparse.Namespace) -> int:
 def _windowed_check(
     td: TiledDem, o: np.ndarray, d: np.ndarray, spans: list[tuple[int, int]], got: RayHits
 ) -> bool:
-    worst = 0.0
+    """Each camera's window cast in memory, in the whole DEM's frame: bit for bit the tiled cast."""
     same = True
     bit_equal = 0
     t_ref = 0.0
+    cells = 0
     for lo, hi in spans:
-        win = td.window_dem(*_window_of(td, o[lo]))
+        win = WindowRayCaster.for_rays(td, o[lo:hi], d[lo:hi], RANGE_M)
+        r0, r1, c0, c1 = win.window
+        cells = max(cells, (r1 - r0) * (c1 - c0))
         t = time.perf_counter()
-        want = RayCaster.from_dem(win).cast(o[lo:hi], d[lo:hi], RANGE_M, coherent=False)
+        want = win.cast(o[lo:hi], d[lo:hi], RANGE_M)
         t_ref += time.perf_counter() - t
-        gcount = np.diff(got.offsets[lo : hi + 1])
         a, b = got.offsets[lo], got.offsets[hi]
-        same &= bool(np.array_equal(want.status, got.status[lo:hi]))
-        same &= bool(np.array_equal(want.counts, gcount))
-        same &= bool(np.array_equal(want.crossed_nodata, got.crossed_nodata[lo:hi]))
-        if same and len(want.range_m):
-            diff = np.abs(want.points - got.points[a:b]).max()
-            worst = max(worst, float(diff))
-            bit_equal += int(np.sum(np.all(want.points == got.points[a:b], axis=1)))
+        mine = RayHits(
+            got.offsets[lo : hi + 1] - a,
+            got.range_m[a:b],
+            got.points[a:b],
+            got.status[lo:hi],
+            got.crossed_nodata[lo:hi],
+            got.truncated[lo:hi],
+        )
+        same &= _identical(want, mine)
+        if np.array_equal(want.offsets, mine.offsets):
+            bit_equal += int(np.sum(np.all(want.points == mine.points, axis=1)))
+        del win
     m = len(got.range_m)
     print(
-        f"windowed in-memory RayCaster: statuses and hit counts {'equal' if same else 'DIFFER'}; "
-        f"hit points max |diff| {worst:.2e} m, {bit_equal} of {m} bit-equal; "
-        f"cast {t_ref:.2f} s (window reads not counted)"
+        f"windowed in-memory RayCaster (whole DEM's frame, windows up to {cells / 1e6:.1f} M "
+        f"cells): {'bit-identical' if same else 'DIFFERENT'}; {bit_equal} of {m} hit points "
+        f"bit-equal; cast {t_ref:.2f} s (window reads and pyramids not counted)"
     )
-    return same and worst < WINDOW_TOL_M
+    return same
+
+
+def _identical(a: RayHits, b: RayHits) -> bool:
+    """Whether two answers are equal bit for bit, every array."""
+    return all(
+        np.array_equal(getattr(a, f), getattr(b, f))
+        for f in ("offsets", "range_m", "points", "status", "crossed_nodata", "truncated")
+    )
 
 
 def _full_check(td: TiledDem, o: np.ndarray, d: np.ndarray, got: RayHits) -> bool:
@@ -261,10 +265,7 @@ def _full_check(td: TiledDem, o: np.ndarray, d: np.ndarray, got: RayHits) -> boo
         dt = time.perf_counter() - t
     finally:
         raw.unlink(missing_ok=True)
-    same = all(
-        np.array_equal(getattr(want, f), getattr(got, f))
-        for f in ("offsets", "range_m", "points", "status", "crossed_nodata", "truncated")
-    )
+    same = _identical(want, got)
     print(
         f"whole DEM, in-memory RayCaster: {'bit-identical' if same else 'DIFFERENT'} "
         f"({dt:.2f} s, pyramid included; its peak RSS {_hwm_mb():.0f} MiB)"
