@@ -1,7 +1,9 @@
 """A DEM larger than memory: a tiled, compressed GeoTIFF read by window, with its tile min/max.
 
 The file is a tiled GeoTIFF (internal square tiles of ``tile`` cells, a power of two;
-DEFLATE or ZSTD with the floating-point predictor; BigTIFF when large), band 1 the
+DEFLATE or ZSTD with the floating-point predictor; BigTIFF when large), written as a
+Cloud-Optimized GeoTIFF with internal overviews (2x reductions, each cell the mean of the
+finite cells below it, down to one tile; any overviews a file has are accepted), band 1 the
 elevation (m, local-frame Z, NaN = nodata) and, when written from a :class:`Dem`, bands 2
 and 3 its variance and count as :meth:`Dem.write` stores them. ``core.terrain.tiled_write``
 writes it strip by strip without ever holding the raster.
@@ -16,7 +18,8 @@ caster (``core.raycast.tiled_cast``) keeps in memory to skip blocks a ray passes
 
 :class:`TiledDem` opens such a file and reads windows and blocks (one dataset handle per
 thread, so reads from several threads never share GDAL state); :meth:`TiledDem.window_dem`
-reads a window into a plain :class:`Dem`.
+reads a window into a plain :class:`Dem`. Reads of cells are always of the full-resolution
+image; :meth:`TiledDem.read_overview` reads an overview (a coarse look at the whole DEM).
 """
 
 from __future__ import annotations
@@ -109,6 +112,9 @@ class TiledDem:
         WKT of the grid's 2-D CRS, if stated.
     vertical_datum : str
         What the elevations are measured from.
+    overviews : tuple of int
+        Decimation factors of the file's internal overviews (``(2, 4, ...)``; empty when
+        it has none).
     """
 
     path: Path
@@ -121,6 +127,7 @@ class TiledDem:
     bands: int
     crs_wkt: str | None = None
     vertical_datum: str = VERTICAL_DATUM_LOCAL
+    overviews: tuple[int, ...] = ()
     _local: threading.local = field(default_factory=threading.local, repr=False)
 
     @classmethod
@@ -146,6 +153,7 @@ class TiledDem:
                 crs_wkt = src.crs.to_wkt() if src.crs else None
                 bands = int(src.count)
                 block = src.block_shapes[0]
+                overviews = tuple(int(f) for f in src.overviews(1))
         except RasterioError as exc:
             raise InputFileError(f"cannot read tiled DEM {path}: {exc}") from None
         if MINMAX_TAG not in tags or TILE_TAG not in tags:
@@ -175,6 +183,7 @@ class TiledDem:
             bands,
             crs_wkt,
             datum,
+            overviews,
         )
 
     @property
@@ -220,6 +229,21 @@ class TiledDem:
         out.fill(np.nan)
         out[r0 - r_lo : r1 - r_lo, c0 - c_lo : c1 - c_lo] = self.read_cells(r0, r1, c0, c1)
         return r1 - by * t, c1 - bx * t
+
+    def read_overview(self, level: int, band: int = 1) -> np.ndarray:
+        """The whole of overview ``level`` (0 = the first, ``overviews[level]`` times coarser).
+
+        Float32, about ``nrows / f x ncols / f`` for factor ``f`` (GDAL rounds the sizes
+        down); NaN = nodata.
+        """
+        import rasterio
+
+        if not 0 <= level < len(self.overviews):
+            raise DemError(f"{self.path} has {len(self.overviews)} overviews, not a level {level}")
+        with rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB), rasterio.open(
+            self.path, overview_level=level
+        ) as ds:
+            return np.ascontiguousarray(ds.read(band, out_dtype=np.float32), np.float32)
 
     def window_dem(self, r0: int, r1: int, c0: int, c1: int) -> Dem:
         """Cells ``[r0:r1, c0:c1]`` as an in-memory :class:`Dem` on their own grid."""

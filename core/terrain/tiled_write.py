@@ -1,10 +1,15 @@
-"""Write a tiled DEM GeoTIFF strip by strip, with its per-block min/max.
+"""Write a tiled DEM as a Cloud-Optimized GeoTIFF, strip by strip, with its per-block min/max.
 
 The layout is ``core.terrain.tiled_dem``'s. The writer asks a *cell source* for one chunk of
 cells at a time (a strip of one tile's height and a few tiles' width, plus the next row and
-column that the chunk's patch blocks reach into), writes it and keeps only the block's
-max and min, so a 40,000 x 40,000 DEM (6.4 GB as float32) is written holding a few tens of
-MB. Sources: an in-memory :class:`Dem` (:func:`write_dem_tiled`), any GeoTIFF read by
+column that the chunk's patch blocks reach into), writes it to a tiled GeoTIFF and keeps
+only the block's max and min, so a 40,000 x 40,000 DEM (6.4 GB as float32) is written
+holding a few tens of MB. GDAL's COG driver then rewrites that file as a COG (same tiles,
+compression and predictor; internal overviews of 2x reductions down to one tile, each cell
+the mean of the finite cells below it; IFDs before the data, smallest overview's tiles
+first), reading and writing tile by tile under a 64 MB block cache; the block min/max and
+the other ``DEMTRACK_*`` items stay in the GDAL metadata, which the COG driver copies.
+Sources: an in-memory :class:`Dem` (:func:`write_dem_tiled`), any GeoTIFF read by
 window (:func:`tile_geotiff`) and a smooth synthetic terrain (:func:`synth_tiled`).
 """
 
@@ -62,7 +67,7 @@ def write_tiled(
     vertical_datum: str = VERTICAL_DATUM_LOCAL,
     chunk_tiles: int = 8,
 ) -> TiledDem:
-    """Write ``source``'s cells over ``grid`` as a tiled DEM GeoTIFF; returns it opened.
+    """Write ``source``'s cells over ``grid`` as a tiled DEM COG; returns it opened.
 
     Parameters
     ----------
@@ -111,16 +116,39 @@ def write_tiled(
     if crs_wkt:
         profile["crs"] = crs_wkt
     width = tile * max(1, int(chunk_tiles))
-    # Written under a temporary name and renamed when complete: a failed write leaves
+    # Written under temporary names and renamed when complete: a failed write leaves
     # no file that looks like a tiled DEM.
     path = Path(path)
     part = path.with_name(path.name + ".partial")
+    tiles = path.with_name(path.name + ".tiles.partial")
     try:
-        _write(part, profile, grid, source, bands, tile, width, minmax, vertical_datum)
+        _write(tiles, profile, grid, source, bands, tile, width, minmax, vertical_datum)
+        _to_cog(tiles, part, tile, compress)
         os.replace(part, path)
     finally:
+        tiles.unlink(missing_ok=True)
         part.unlink(missing_ok=True)
     return TiledDem.open(path)
+
+
+def _to_cog(src: Path, dst: Path, tile: int, compress: str) -> None:
+    """Rewrite the tiled GeoTIFF ``src`` as a COG at ``dst`` with GDAL's COG driver."""
+    import rasterio
+    from rasterio.shutil import copy
+
+    with rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB, GDAL_NUM_THREADS="ALL_CPUS"):
+        copy(
+            src,
+            dst,
+            driver="COG",
+            BLOCKSIZE=tile,
+            COMPRESS=compress.upper(),
+            PREDICTOR="FLOATING_POINT",
+            BIGTIFF="IF_SAFER",
+            OVERVIEWS="AUTO",
+            RESAMPLING="AVERAGE",
+            NUM_THREADS="ALL_CPUS",
+        )
 
 
 def _write(
