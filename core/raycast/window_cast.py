@@ -1,4 +1,4 @@
-"""An in-memory cast over a window of a tiled DEM, in the whole DEM's frame: its answers bit for bit.
+"""An in-memory cast over a window of a tiled DEM, in the whole DEM's frame: the same bits.
 
 A window read into a plain :class:`~demtrack.core.terrain.dem.Dem` (``TiledDem.window_dem``)
 has its own grid origin, height range and min/max pyramid, so ``RayCaster`` over it rounds
@@ -101,7 +101,7 @@ class WindowRayCaster(RayCaster):
         directions: np.ndarray,
         max_range: float,
     ) -> WindowRayCaster:
-        """The caster of the blocks that rays reach within ``max_range`` (finite, m), plus one cell."""
+        """The caster of the blocks the rays reach within ``max_range`` (finite, m) + one cell."""
         lo, hi = _footprint_box(td, origins, directions, max_range)
         t = td.tile
         nby, nbx = td.minmax.shape[:2]
@@ -127,10 +127,7 @@ class WindowRayCaster(RayCaster):
             If a ray's footprint within ``max_range`` leaves the window (a cast there
             would read cells that are not loaded).
         """
-        rng = np.broadcast_to(np.asarray(max_range, np.float64), (len(origins),))
-        if not np.all(np.isfinite(rng)):
-            raise RaycastError("a windowed cast needs a finite max_range")
-        box = _footprint_box(self, origins, directions, rng)
+        box = _footprint_box(self, origins, directions, max_range)
         g = self.grid
         r0, r1, c0, c1 = self.window
         # One cell inside the window's edges, except where they are the DEM's own.

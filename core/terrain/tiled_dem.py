@@ -240,9 +240,10 @@ class TiledDem:
 
         if not 0 <= level < len(self.overviews):
             raise DemError(f"{self.path} has {len(self.overviews)} overviews, not a level {level}")
-        with rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB), rasterio.open(
-            self.path, overview_level=level
-        ) as ds:
+        with (
+            rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB),
+            rasterio.open(self.path, overview_level=level) as ds,
+        ):
             return np.ascontiguousarray(ds.read(band, out_dtype=np.float32), np.float32)
 
     def window_dem(self, r0: int, r1: int, c0: int, c1: int) -> Dem:

@@ -113,5 +113,3 @@ def test_a_window_of_every_block_is_the_whole_dem(tiled: TiledDem, dem: Dem) -> 
 def test_blocks_outside_are_refused(tiled: TiledDem) -> None:
     with pytest.raises(RaycastError, match="outside"):
         WindowRayCaster.from_blocks(tiled, 0, 99, 0, 1)
-
-

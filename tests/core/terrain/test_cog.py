@@ -25,7 +25,9 @@ from demtrack.core.terrain.grid import GridSpec
 from demtrack.core.terrain.tiled_dem import MINMAX_TAG, TILE_TAG, TiledDem, encode_minmax
 from demtrack.core.terrain.tiled_write import synth_cells, write_dem_tiled
 
-VALIDATOR = Path("/usr/lib/python3/dist-packages/osgeo_utils/samples/validate_cloud_optimized_geotiff.py")
+VALIDATOR = Path(
+    "/usr/lib/python3/dist-packages/osgeo_utils/samples/validate_cloud_optimized_geotiff.py"
+)
 SYSTEM_PYTHON = Path("/usr/bin/python3")
 TILE = 128
 
@@ -39,7 +41,9 @@ def _dem(n: int = 1100) -> Dem:
 def _gdalinfo(path: Path) -> str:
     if shutil.which("gdalinfo") is None:
         pytest.skip("gdalinfo (gdal-bin) is not installed")
-    return subprocess.run(["gdalinfo", str(path)], capture_output=True, text=True, check=True).stdout
+    return subprocess.run(
+        ["gdalinfo", str(path)], capture_output=True, text=True, check=True
+    ).stdout
 
 
 def _validate(path: Path) -> subprocess.CompletedProcess[str]:
