@@ -139,7 +139,7 @@ def _run(args: argparse.Namespace) -> int:
         td = TiledDem.open(args.dem)
         print(f"reusing {args.dem}")
     else:
-        if free_gb < 0.8 * raw_gb:
+        if free_gb < 1.6 * raw_gb:  # the streamed file and its COG, as `dem synth` checks
             print(f"not enough free disk for {args.dem}")
             return 1
         td = synth_tiled(args.dem, size, tile=args.tile, compress="zstd")

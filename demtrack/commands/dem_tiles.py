@@ -1,4 +1,4 @@
-"""``demtrack dem tile|synth``: a tiled DEM GeoTIFF with its block min/max (large sites).
+"""``demtrack dem tile|synth``: a tiled DEM (a Cloud-Optimized GeoTIFF) with its block min/max.
 
 ``dem tile`` rewrites any north-up GeoTIFF DEM (a site's ``dem.tif`` included) window by
 window; ``dem synth`` writes a smooth synthetic terrain of any size (40,000 x 40,000 cells
@@ -20,9 +20,11 @@ from .common import positive, positive_int, require_suffix
 
 __all__ = ["register"]
 
-#: Share of the raw float32 size a compressed tiled DEM may take, for the free-disk check
-#: (smooth terrain with the floating-point predictor: about 0.4 .. 0.7).
-_DISK_SHARE = 0.8
+#: Share of the raw float32 size writing a tiled DEM may take at its peak, for the free-disk
+#: check: the streamed tiled file and the COG rewritten from it (with its overviews, and
+#: GDAL's temporary overview file) exist together, each about 0.4 .. 0.7 of raw on smooth
+#: terrain with the floating-point predictor.
+_DISK_SHARE = 1.6
 
 
 def _check_disk(out: Path, cells: int, bands: int) -> None:
@@ -115,7 +117,9 @@ def register(sub: argparse._SubParsersAction) -> None:
             "--compress", choices=("deflate", "zstd"), default="deflate", help="default deflate"
         )
 
-    t = dsub.add_parser("tile", help="rewrite a GeoTIFF DEM as a tiled DEM with block min/max")
+    t = dsub.add_parser(
+        "tile", help="rewrite a GeoTIFF DEM as a tiled DEM (COG) with block min/max"
+    )
     t.add_argument("--dem", type=Path, required=True, metavar="IN.tif")
     common(t)
     t.set_defaults(func=_run_tile)
