@@ -18,7 +18,10 @@ import sqlite3
 import pytest
 from server_helpers import AUTH, walk
 
-pytestmark = pytest.mark.timeout(180)
+pytestmark = [
+    pytest.mark.timeout(180),
+    pytest.mark.sqlite_only("SQLite's own file: its size cap (SQLITE_FULL), unlinking, replacing"),
+]
 
 
 def post(client, **kw):
