@@ -8,6 +8,10 @@ ends. PostgreSQL refuses to run as root: as root the cluster runs as the ``postg
 
 ``PostgresCluster.create_database()`` gives each test its own empty database (with the
 PostGIS extension available; the store's first migration creates it).
+``PostgresCluster.create_store_database()`` gives one already migrated, cloned from a
+template database migrated once per session (``CREATE DATABASE ... TEMPLATE``: about 0.3 s
+instead of the 2 s the migrations take); the template holds no ``store_identity`` row, so
+each clone gets its own random store id when a store first opens it.
 """
 
 from __future__ import annotations
@@ -54,6 +58,7 @@ class PostgresCluster:
         self.port = _free_port()
         self.user = "demtrack"
         self._as_postgres = os.geteuid() == 0
+        self._template: str | None = None
 
     # -- running the binaries ------------------------------------------------------------
     def _cmd(self, *args: str) -> list[str]:
@@ -139,11 +144,26 @@ class PostgresCluster:
     def database_url(self, name: str) -> str:
         return f"postgresql://{self.user}@127.0.0.1:{self.port}/{name}"
 
-    def create_database(self, prefix: str = "t") -> str:
-        """A new empty database; returns its URL."""
+    def create_database(self, prefix: str = "t", template: str | None = None) -> str:
+        """A new database, empty or a copy of ``template`` (a database name); its URL."""
         import psycopg
 
         name = f"{prefix}_{uuid.uuid4().hex[:12]}"
+        clause = f' TEMPLATE "{template}"' if template else ""
         with psycopg.connect(self.url, autocommit=True) as conn:
-            conn.execute(f'CREATE DATABASE "{name}"')
+            conn.execute(f'CREATE DATABASE "{name}"{clause}')
         return self.database_url(name)
+
+    def create_store_database(self) -> str:
+        """A new database holding the store's current schema and no rows; its URL."""
+        if self._template is None:
+            import psycopg
+
+            from demtrack.server.store.postgres.database import PostgresStore
+
+            url = self.create_database("template")
+            PostgresStore(url).close()  # every migration
+            with psycopg.connect(url, autocommit=True) as conn:
+                conn.execute("DELETE FROM store_identity")  # each clone makes its own
+            self._template = url.rsplit("/", 1)[1]
+        return self.create_database("s", template=self._template)

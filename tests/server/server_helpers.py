@@ -132,3 +132,22 @@ def start_server(
             break
     proc.kill()
     raise AssertionError("server did not start")
+
+
+def database_rows(tmp: Path, store_kw: dict[str, Any], sql: str) -> list[tuple[Any, ...]]:
+    """The rows of ``sql`` (no parameters) read on a connection of its own to the test's
+    database: the PostgreSQL database ``store_kw`` names, else :func:`make_app`'s SQLite
+    file under ``tmp``. What another process would see: only committed rows."""
+    url = store_kw.get("database_url")
+    if url:
+        import psycopg
+
+        with psycopg.connect(url) as conn:
+            return [tuple(r) for r in conn.execute(sql.encode()).fetchall()]
+    import sqlite3
+
+    conn = sqlite3.connect(tmp / "console.sqlite3")
+    try:
+        return conn.execute(sql).fetchall()
+    finally:
+        conn.close()

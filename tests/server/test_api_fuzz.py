@@ -40,9 +40,13 @@ CHECKS = [
 
 
 @pytest.fixture(scope="module")
-def api_schema(sample_site_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Any:
+def api_schema(
+    sample_site_dir: Path, tmp_path_factory: pytest.TempPathFactory, module_store_kw: dict
+) -> Any:
     # No live activity detectors: they cost time per ingest and are not what is fuzzed.
-    app = make_app(sample_site_dir, tmp_path_factory.mktemp("fuzz"), events=False)
+    app = make_app(
+        sample_site_dir, tmp_path_factory.mktemp("fuzz"), events=False, **module_store_kw
+    )
     return schemathesis.openapi.from_asgi("/openapi.json", app)
 
 

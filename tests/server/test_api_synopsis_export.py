@@ -23,11 +23,12 @@ pytestmark = pytest.mark.timeout(600)
 
 
 @pytest.fixture(scope="module")
-def fed(sample_site_dir, tmp_path_factory):
+def fed(sample_site_dir, tmp_path_factory, module_store_kw):
     """A server that ingested the first 30 s of the vehicle run, 0.5 s per batch."""
     site = load_site(sample_site_dir)
     recs = scenario_records(site, "vehicle-run", 30.0)
-    with TestClient(make_app(sample_site_dir, tmp_path_factory.mktemp("syn"))) as c:
+    app = make_app(sample_site_dir, tmp_path_factory.mktemp("syn"), **module_store_kw)
+    with TestClient(app) as c:
         post_in_time_batches(c, recs)
         yield c
 

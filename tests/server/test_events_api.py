@@ -66,8 +66,9 @@ def test_a_prediction_is_one_row_per_track_updated_in_place(sample_site_dir, rec
 
 
 @pytest.fixture(scope="module")
-def fed(sample_site_dir, records, tmp_path_factory):
-    with TestClient(make_app(sample_site_dir, tmp_path_factory.mktemp("ev"))) as c:
+def fed(sample_site_dir, records, tmp_path_factory, module_store_kw):
+    app = make_app(sample_site_dir, tmp_path_factory.mktemp("ev"), **module_store_kw)
+    with TestClient(app) as c:
         post_in_time_batches(c, records)
         yield c
 

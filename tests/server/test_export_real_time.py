@@ -30,11 +30,12 @@ UNTIL_S = 30.0
 
 
 @pytest.fixture(scope="module")
-def real(sample_site_dir, tmp_path_factory):
+def real(sample_site_dir, tmp_path_factory, module_store_kw):
     """A server fed the first 30 s of the vehicle run at 2026-12-01T14:30:00Z."""
     sc = make_scenario(load_site(sample_site_dir), "vehicle-run")
     dets = [d for d in sc.detections if d.t_s < UNTIL_S]
-    with TestClient(make_app(sample_site_dir, tmp_path_factory.mktemp("real"))) as c:
+    app = make_app(sample_site_dir, tmp_path_factory.mktemp("real"), **module_store_kw)
+    with TestClient(app) as c:
         for k in range(int(UNTIL_S / 0.5)):
             part = [d for d in dets if 0.5 * k <= d.t_s < 0.5 * (k + 1)]
             if not part:

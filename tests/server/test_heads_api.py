@@ -48,8 +48,8 @@ def ground_points(site_dir):
     return pts[seen >= 0.9][0], pts[seen == 0.0][0]
 
 
-def test_slew_look_and_the_refusals(site_dir, tmp_path):
-    with TestClient(make_app(site_dir, tmp_path, heads="sim")) as c:
+def test_slew_look_and_the_refusals(site_dir, tmp_path, store_kw):
+    with TestClient(make_app(site_dir, tmp_path, heads="sim", **store_kw)) as c:
         body = wait_for(c, "cam1", lambda b: b["status"] is not None)
         assert body["mode"] == "idle" and body["kind"] == "sim"
         assert body["limits"]["pan_rate_deg_s"] == 90.0  # site.json's slew_limits
@@ -101,12 +101,12 @@ def test_slew_look_and_the_refusals(site_dir, tmp_path):
         assert r.status_code == 404 and "no live track 999" in r.json()["detail"]
 
 
-def test_follow_release_and_restart(sample_site_dir, tmp_path):
+def test_follow_release_and_restart(sample_site_dir, tmp_path, store_kw):
     # cam3 alone is active: cam1's detections (a fixed camera) make the track, cam3's
     # (no poses at those times: its head reports at the wall clock) are held as no_pose.
     site_dir = active_site(sample_site_dir, tmp_path / "site", {"cam3": {"active": True}})
     records = scenario_records(load_site(site_dir), "vehicle-run", 30.0, score=0.5)
-    with TestClient(make_app(site_dir, tmp_path, heads="sim")) as c:
+    with TestClient(make_app(site_dir, tmp_path, heads="sim", **store_kw)) as c:
         post_in_time_batches(c, records)
         live = [t for t in c.get("/api/tracks", headers=AUTH).json()["tracks"] if t["live"]]
         tid = live[0]["id"]
@@ -115,22 +115,22 @@ def test_follow_release_and_restart(sample_site_dir, tmp_path):
         assert r.json()["mode"] == "follow" and r.json()["target"]["track_id"] == tid
         before = c.get("/api/sensors/cam3/head", headers=AUTH).json()
     # A restart: the journal gives the head its mode and target back.
-    with TestClient(make_app(site_dir, tmp_path, heads="sim")) as c:
+    with TestClient(make_app(site_dir, tmp_path, heads="sim", **store_kw)) as c:
         after = wait_for(c, "cam3", lambda b: b["status"] is not None)
         assert (after["mode"], after["target"]) == (before["mode"], before["target"])
         r = c.delete("/api/sensors/cam3/follow", headers=AUTH)
         assert r.status_code == 200 and r.json()["mode"] == "idle"
-    with TestClient(make_app(site_dir, tmp_path, heads="sim")) as c:
+    with TestClient(make_app(site_dir, tmp_path, heads="sim", **store_kw)) as c:
         assert c.get("/api/sensors/cam3/head", headers=AUTH).json()["mode"] == "idle"
 
 
-def test_heads_off_and_a_site_without_active_heads(site_dir, sample_site_dir, tmp_path):
-    with TestClient(make_app(site_dir, tmp_path, heads="off")) as c:
+def test_heads_off_and_a_site_without_active_heads(site_dir, sample_site_dir, tmp_path, store_kw):
+    with TestClient(make_app(site_dir, tmp_path, heads="off", **store_kw)) as c:
         r = c.put("/api/sensors/cam1/slew", headers=AUTH, json={"pan_deg": 1, "tilt_deg": 0})
         assert r.status_code == 409
         assert c.get("/api/heads", headers=AUTH).json() == []
     # auto (the default): an active sensor without a head_adapter is its gateway's
-    with TestClient(make_app(site_dir, tmp_path)) as c:
+    with TestClient(make_app(site_dir, tmp_path, **store_kw)) as c:
         assert c.get("/api/heads", headers=AUTH).json() == []
         r = c.put("/api/sensors/cam1/slew", headers=AUTH, json={"pan_deg": 1, "tilt_deg": 0})
         assert r.status_code == 409 and "not driven by this server" in r.json()["detail"]

@@ -1,8 +1,6 @@
 from __future__ import annotations
 
-import sqlite3
-
-from server_helpers import AUTH, walk
+from server_helpers import AUTH, database_rows, walk
 
 
 def post(c, records, key=None):
@@ -10,7 +8,7 @@ def post(c, records, key=None):
     return c.post("/api/detections", headers=AUTH, json=body)
 
 
-def test_ack_counts_reasons_and_is_durable(client, tmp_path):
+def test_ack_counts_reasons_and_is_durable(client, tmp_path, store_kw, store_backend):
     good = walk(n=5)
     bad = [
         {"t": 1.0, "sensor": "cam1", "bbox": [0, 0, 1], "class": "human"},  # malformed
@@ -38,11 +36,11 @@ def test_ack_counts_reasons_and_is_durable(client, tmp_path):
     }
     assert sorted(i["index"] for i in ack["issues"]) == list(range(5, 11))
     # committed: another connection sees the rows the moment the ack is back
-    conn = sqlite3.connect(tmp_path / "console.sqlite3")
-    rows = conn.execute("SELECT id, t_s, sensor FROM detections ORDER BY id").fetchall()
+    rows = database_rows(tmp_path, store_kw, "SELECT id, t_s, sensor FROM detections ORDER BY id")
     assert [r[0] for r in rows] == ack["detection_ids"]
     assert [r[1] for r in rows] == [g["t"] for g in good]
-    assert conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    if store_backend == "sqlite":
+        assert database_rows(tmp_path, store_kw, "PRAGMA journal_mode") == [("wal",)]
     listed = client.get("/api/detections", headers=AUTH).json()
     assert [d["t"] for d in listed] == [g["t"] for g in good]
     assert listed[0]["class"] == "vehicle" and listed[0]["local_id"] == "cam1-0"

@@ -34,14 +34,15 @@ T_MAX = 30.0
 
 
 @pytest.fixture(scope="module")
-def fed(sample_site_dir, tmp_path_factory):
+def fed(sample_site_dir, tmp_path_factory, module_store_kw):
     """A server that ingested 30 s of two scenarios and a later walk, 0.5 s per batch."""
     site = load_site(sample_site_dir)
     recs = walk(n=20, t0=T_MAX + 60.0)  # a minute later: the scenarios' tracks have ended
     for name in ("vehicle-run", "pedestrians"):
         recs += scenario_records(site, name, T_MAX)
     recs.sort(key=lambda r: (r["t"], r["sensor"]))
-    with TestClient(make_app(sample_site_dir, tmp_path_factory.mktemp("jr"))) as c:
+    app = make_app(sample_site_dir, tmp_path_factory.mktemp("jr"), **module_store_kw)
+    with TestClient(app) as c:
         post_in_time_batches(c, recs)
         yield c
 

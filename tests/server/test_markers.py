@@ -21,7 +21,8 @@ from server_helpers import AUTH, TOKEN, make_app
 from demtrack.core.site.folder import load_site
 from demtrack.server.messages import ServerMessage
 from demtrack.server.site_info import geoid_grid_path
-from demtrack.server.store.database import SCHEMA_VERSION, Store
+from demtrack.server.store.database import SCHEMA_VERSION
+from demtrack.server.store.opening import open_store
 
 pytestmark = pytest.mark.timeout(60)
 MSG = TypeAdapter(ServerMessage)
@@ -98,8 +99,8 @@ def test_marker_refusals_are_one_line(client):
     assert client.delete("/api/markers/1").status_code == 401
 
 
-def test_delete_is_streamed_and_markers_survive_a_restart(sample_site_dir, tmp_path):
-    with TestClient(make_app(sample_site_dir, tmp_path)) as c:
+def test_delete_is_streamed_and_markers_survive_a_restart(sample_site_dir, tmp_path, store_kw):
+    with TestClient(make_app(sample_site_dir, tmp_path, **store_kw)) as c:
         a = c.post(
             "/api/markers",
             headers=AUTH,
@@ -128,11 +129,12 @@ def test_delete_is_streamed_and_markers_survive_a_restart(sample_site_dir, tmp_p
             ("add", b["id"]),
             ("delete", a["id"]),
         ]
-    with TestClient(make_app(sample_site_dir, tmp_path)) as c:  # the same database again
+    # the same database again
+    with TestClient(make_app(sample_site_dir, tmp_path, **store_kw)) as c:
         assert c.get("/api/markers", headers=AUTH).json()["markers"] == [b]
         c3 = c.post("/api/markers", headers=AUTH, json={"t_s": T0, "e_m": 1, "n_m": 2, "u_m": 3})
         assert c3.json()["id"] > b["id"]  # a removed id is never reused
-    store = Store(tmp_path / "console.sqlite3")
+    store = open_store(store_kw.get("database_url") or tmp_path / "console.sqlite3")
     assert store.schema_version() == SCHEMA_VERSION
     store.close()
 

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import json
-import sqlite3
 
 import numpy as np
 import pytest
-from server_helpers import AUTH
+from server_helpers import AUTH, database_rows
 
 from demtrack.core.camera.pose_series import PoseSample, camera_at
 from demtrack.core.site.folder import load_site
@@ -32,7 +31,7 @@ def post(c, sensor, records, key=None, headers=AUTH):
     )
 
 
-def test_ack_counts_each_reason_and_the_batch_is_durable(client, tmp_path):
+def test_ack_counts_each_reason_and_the_batch_is_durable(client, tmp_path, store_kw):
     good = poses(3)
     bad = [
         {"t": T0 + 1.0, "pan_deg": float("nan"), "tilt_deg": 0.0},  # not finite
@@ -59,8 +58,8 @@ def test_ack_counts_each_reason_and_the_batch_is_durable(client, tmp_path):
     assert sorted(i["index"] for i in ack["issues"]) == list(range(3, 10))
     assert all("\n" not in i["message"] for i in ack["issues"])
     # committed: another connection sees the rows as soon as the ack is back
-    conn = sqlite3.connect(tmp_path / "console.sqlite3")
-    rows = conn.execute("SELECT sensor, t_s, batch_id FROM poses ORDER BY t_s").fetchall()
+    sql = "SELECT sensor, t_s, batch_id FROM poses ORDER BY t_s"
+    rows = database_rows(tmp_path, store_kw, sql)
     assert [r[1] for r in rows] == [p["t"] for p in good] + [1_780_000_001.0]
     assert {r[0] for r in rows} == {"cam1"} and {r[2] for r in rows} == {ack["batch_id"]}
 
@@ -72,13 +71,12 @@ def test_order_is_kept_across_batches_and_per_sensor(client):
     assert post(client, "cam2", poses(3, t0=T0)).json()["accepted"] == 3  # another sensor
 
 
-def test_batch_key_makes_a_resend_harmless(client, tmp_path):
+def test_batch_key_makes_a_resend_harmless(client, tmp_path, store_kw):
     first = post(client, "cam1", poses(4), key="head1-0001").json()
     again = post(client, "cam1", poses(4), key="head1-0001").json()
     assert again["duplicate"] and not first["duplicate"]
     assert again["batch_id"] == first["batch_id"] and again["accepted"] == 4
-    conn = sqlite3.connect(tmp_path / "console.sqlite3")
-    assert conn.execute("SELECT COUNT(*) FROM poses").fetchone()[0] == 4
+    assert database_rows(tmp_path, store_kw, "SELECT COUNT(*) FROM poses") == [(4,)]
 
 
 def test_unknown_sensor_auth_and_size_limits(client_factory):

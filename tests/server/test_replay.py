@@ -170,7 +170,7 @@ def wait_done(replay: Replay, timeout_s: float = 240.0) -> None:
     assert replay.error is None
 
 
-def test_replayed_tracks_follow_the_scenario_truth(sample_site_dir, tmp_path):
+def test_replayed_tracks_follow_the_scenario_truth(sample_site_dir, tmp_path, store_kw):
     scenario = make_scenario(load_site(sample_site_dir), "passing-vehicles")
     truth = scenario.truths
     app = make_app(
@@ -179,6 +179,7 @@ def test_replayed_tracks_follow_the_scenario_truth(sample_site_dir, tmp_path):
         replay=["passing-vehicles"],
         replay_speed=200.0,
         replay_loop=False,
+        **store_kw,
     )
     with TestClient(app) as client:
         replay = app.state.replay
@@ -209,8 +210,8 @@ def test_replayed_tracks_follow_the_scenario_truth(sample_site_dir, tmp_path):
     assert not replay.running
 
 
-def test_a_restart_replays_after_the_stored_times(sample_site_dir, tmp_path):
-    kw = {"replay": ["passing-vehicles"], "replay_speed": 500.0, "replay_loop": False}
+def test_a_restart_replays_after_the_stored_times(sample_site_dir, tmp_path, store_kw):
+    kw = {"replay": ["passing-vehicles"], "replay_speed": 500.0, "replay_loop": False, **store_kw}
     app = make_app(sample_site_dir, tmp_path, **kw)
     with TestClient(app):
         wait_done(app.state.replay)

@@ -9,13 +9,14 @@ from fastapi.testclient import TestClient
 from server_helpers import AUTH, make_app
 
 
-def test_the_replay_waits_for_its_hook_then_plays(sample_site_dir, tmp_path):
+def test_the_replay_waits_for_its_hook_then_plays(sample_site_dir, tmp_path, store_kw):
     app = make_app(
         sample_site_dir,
         tmp_path,
         replay=["passing-vehicles"],
         replay_speed=500.0,
         replay_loop=False,
+        **store_kw,
     )
     called = threading.Event()
     release = threading.Event()

@@ -24,8 +24,11 @@ def _play(app, n_frames=20):
     assert replay.stop() and replay.n_frames >= n_frames
 
 
-def test_replay_starts_at_the_given_utc_time_and_after_what_is_stored(sample_site_dir, tmp_path):
+def test_replay_starts_at_the_given_utc_time_and_after_what_is_stored(
+    sample_site_dir, tmp_path, store_kw
+):
     kw = {"replay": ["passing-vehicles"], "replay_speed": 500.0, "replay_start_s": START}
+    kw.update(store_kw)
     app = make_app(sample_site_dir, tmp_path, **kw)
     with TestClient(app) as client:
         _play(app)

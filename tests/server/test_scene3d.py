@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fastapi.testclient import TestClient
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
@@ -725,11 +726,13 @@ def cam_id(scene, session: str) -> int:
     return int(k["id"])
 
 
-def test_follow_endpoint(client_factory):
-    from server_helpers import AUTH, walk
+def test_follow_endpoint(client_factory, sample_site_dir, tmp_path, store_kw):
+    from server_helpers import AUTH, make_app, walk
 
-    plain = client_factory()
-    r = plain.get("/api/scene3d/follow", headers=AUTH)
+    # Stopped before the next one starts: on PostgreSQL two servers on one database at
+    # once are a cluster, where only the lease holder (this one) would track.
+    with TestClient(make_app(sample_site_dir, tmp_path, **store_kw)) as plain:
+        r = plain.get("/api/scene3d/follow", headers=AUTH)
     assert r.status_code == 404 and "not running" in r.json()["detail"]
     c = client_factory(scene3d=True, viser_port=0)
     r = c.post("/api/detections", json={"detections": walk(n=30)}, headers=AUTH)

@@ -152,3 +152,14 @@ def test_a_bad_setting_is_one_line(sample_site_dir: Path, tmp_path: Path):
         env={**os.environ, "DEMTRACK_TOKEN": "t", **env_bad},
     )  # fmt: skip
     _assert_one_line(proc, "DEMTRACK_REPLAY_SPEED", "greater than 0")
+
+
+def test_a_newer_postgres_database_is_one_line(postgres_cluster, sample_site_dir: Path):
+    """The PostgreSQL meaning of ``newer_schema_db``: a database a newer demtrack migrated."""
+    import psycopg
+
+    url = postgres_cluster.create_store_database()
+    with psycopg.connect(url, autocommit=True) as conn:
+        conn.execute("UPDATE schema_version SET version = 999")
+    proc = _run("serve", "--site", str(sample_site_dir), "--database-url", url)
+    _assert_one_line(proc, url, "newer")

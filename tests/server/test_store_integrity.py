@@ -1,4 +1,4 @@
-"""A full disk and a lost database file (issue 26, item 15).
+"""A full disk and a lost database file (issue 26, item 15); a lost PostgreSQL connection.
 
 A full disk gave a 500 and a traceback: now 507 with one line, reads go on, and the next
 batch after space returns is stored. A database file deleted or replaced while the server
@@ -25,6 +25,7 @@ def post(client, **kw):
     return client.post("/api/detections", headers=AUTH, json={"detections": walk(**kw)})
 
 
+@pytest.mark.sqlite_only("SQLite's own full disk: a page cap gives SQLITE_FULL")
 def test_a_full_disk_is_507_reads_go_on_and_it_recovers(client, caplog):
     assert post(client, n=10).status_code == 200
     store = client.app.state.console.store
@@ -60,6 +61,7 @@ def _db(client):
     return client.app.state.console.store.path
 
 
+@pytest.mark.sqlite_only("the SQLite file unlinked under the server")
 def test_a_deleted_database_file_stops_acknowledging_loudly(client, caplog):
     assert post(client, n=5).status_code == 200
     caplog.set_level(logging.INFO, logger="demtrack.server")
@@ -74,6 +76,7 @@ def test_a_deleted_database_file_stops_acknowledging_loudly(client, caplog):
     assert client.get("/api/health").status_code == 200
 
 
+@pytest.mark.sqlite_only("another SQLite file under the same name")
 def test_a_replaced_database_file_stops_acknowledging(client, tmp_path):
     assert post(client, n=5).status_code == 200
     db = _db(client)
@@ -84,3 +87,31 @@ def test_a_replaced_database_file_stops_acknowledging(client, tmp_path):
     r = post(client, n=5, t0=10.0)
     assert r.status_code == 503, r.text
     assert "replaced" in r.json()["detail"]
+
+
+# The PostgreSQL meaning of losing the database: the server drops the console's connections
+# (a restart of the database server, a failover, an administrator's pg_terminate_backend).
+def test_a_lost_postgres_connection_is_503_and_the_next_batch_reconnects(
+    sample_site_dir, tmp_path, postgres_cluster
+):
+    import psycopg
+    from fastapi.testclient import TestClient
+    from server_helpers import make_app
+
+    url = postgres_cluster.create_store_database()
+    with TestClient(make_app(sample_site_dir, tmp_path, database_url=url)) as c:
+        assert post(c, n=5).status_code == 200
+        with psycopg.connect(postgres_cluster.url, autocommit=True) as conn:
+            conn.execute(
+                "SELECT pg_terminate_backend(pid) FROM pg_stat_activity"
+                " WHERE datname = %s AND pid <> pg_backend_pid()",
+                (url.rsplit("/", 1)[1],),
+            )
+        r = post(c, n=5, t0=10.0)
+        assert r.status_code == 503, r.text
+        detail = r.json()["detail"]
+        assert "cannot be reached" in detail and "\n" not in detail
+        assert post(c, n=5, t0=10.0).status_code == 200  # the next one reconnects
+        listed = c.get("/api/detections", headers=AUTH, params={"limit": 100}).json()
+        assert [d["t"] for d in listed] == [d["t"] for d in walk(n=5) + walk(n=5, t0=10.0)]
+        assert c.get("/api/health").status_code == 200

@@ -9,7 +9,7 @@ from server_helpers import AUTH, TOKEN, walk
 from starlette.websockets import WebSocketDisconnect
 
 from demtrack.server.messages import ServerMessage
-from demtrack.server.store.database import Store
+from demtrack.server.store.opening import open_store
 
 pytestmark = pytest.mark.timeout(120)
 MSG = TypeAdapter(ServerMessage)
@@ -38,14 +38,18 @@ def first_stream_message(ws) -> dict:
             return m
 
 
-def test_store_id_is_made_with_the_file_and_kept(tmp_path):
-    a = Store(tmp_path / "a.sqlite3")
-    b = Store(tmp_path / "b.sqlite3")
+def test_store_id_is_made_with_the_database_and_kept(tmp_path, store_backend, request):
+    if store_backend == "sqlite":
+        targets = [tmp_path / "a.sqlite3", tmp_path / "b.sqlite3"]
+    else:  # two copies of the tests' migrated template: each still gets its own id
+        cluster = request.getfixturevalue("postgres_cluster")
+        targets = [cluster.create_store_database() for _ in range(2)]
+    a, b = (open_store(t) for t in targets)
     ida, idb = a.store_id, b.store_id
     a.close()
     b.close()
     assert len(ida) >= 16 and ida != idb
-    again = Store(tmp_path / "a.sqlite3")
+    again = open_store(targets[0])
     assert again.store_id == ida
     again.close()
 

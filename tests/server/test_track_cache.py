@@ -99,11 +99,13 @@ def _points(store):
     return {b["id"]: b["points"] for b in store.tracks()}
 
 
-def test_cached_answers_equal_uncached_over_live_ingest_and_restart(sample_site_dir, tmp_path):
+def test_cached_answers_equal_uncached_over_live_ingest_and_restart(
+    sample_site_dir, tmp_path, store_kw
+):
     site = load_site(sample_site_dir)
     recs = _records(site, 40.0)
     seen = {"revised": 0, "ended": 0, "misses": 0}
-    with TestClient(make_app(sample_site_dir, tmp_path)) as c:
+    with TestClient(make_app(sample_site_dir, tmp_path, **store_kw)) as c:
         store = c.app.state.console.store
         k = 0
         prev = {}
@@ -129,7 +131,8 @@ def test_cached_answers_equal_uncached_over_live_ingest_and_restart(sample_site_
         t_end = recs[-1]["t"]
     # The test exercised what it is about: revised tails, ended tracks, re-reads.
     assert seen["revised"] > 0 and seen["ended"] > 0 and seen["misses"] > len(prev)
-    with TestClient(make_app(sample_site_dir, tmp_path)) as c:  # start-up replay rewrites
+    # a restart: the start-up replay rewrites
+    with TestClient(make_app(sample_site_dir, tmp_path, **store_kw)) as c:
         _check(c, t_end)
         _check(c, t_end)  # now from the cache
 
