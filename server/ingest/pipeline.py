@@ -152,7 +152,7 @@ class Pipeline:
         self._last_t: dict[str, float] = {}
         self._n_det: dict[str, int] = {}
         self._pose_interval_s = float(pose_interval_s)
-        self.writes = HeldWrites(store, publish, self.commits.lock)
+        self.writes = HeldWrites(store, self._publish_now, self.commits.lock)
         self._fresh_tracking()
         self._flush_timer: threading.Timer | None = None
         self._inline: dict[str, Any] | None = None
@@ -243,7 +243,7 @@ class Pipeline:
         """The tracker, its reorder buffer, track bodies, pose book and events, all new."""
         self.writes.close()  # what it held is rebuilt from the durable state
         #: Derived writes in order; those a full store refused wait for space.
-        self.writes = HeldWrites(self.store, self.publish, self.commits.lock)
+        self.writes = HeldWrites(self.store, self._publish_now, self.commits.lock)
         self.buffer = ReorderBuffer(self.reorder_lag_s)
         self.feed = TrackerFeed(build_tracker(self.method, roads=self.site.roads), self.buffer)
         self.bodies = TrackBodies(self.site.frame)
@@ -542,6 +542,10 @@ class Pipeline:
                 self._arm_pose_flush()
         except Exception:  # noqa: BLE001 - a timer thread: log, never raise
             log.exception("sending held-back sensor_pose messages failed")
+
+    def _publish_now(self, messages: list[Any]) -> None:
+        """Hand ``messages`` to :attr:`publish` as it is now (it may be replaced)."""
+        self.publish(messages)
 
     def close(self) -> None:
         """Stop the pose flush timer (before the store closes)."""
