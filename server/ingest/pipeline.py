@@ -40,10 +40,11 @@ from ..store.integrity import StoreUnavailableError
 from .events import event_message, ingest_message
 from .fix_codec import fix_bodies, fixes_from_bodies
 from .group_commit import Ack, GroupCommit, Request, commit_group
+from .held_writes import HeldWrites
 from .pose_book import WINDOW_S, PoseBook, geolocate_posed, sample_from_body
 from .pose_stream import PoseAnnouncer
 from .pose_values import ParsedPoses
-from .publish import Publisher, sensor_status_messages, store_and_publish
+from .publish import Publisher, sensor_status_messages
 from .reorder import ReorderBuffer
 from .replay_on_start import load_stored_fixes
 from .stream_messages import EventPayload, FixPayload, StreamPayload
@@ -151,6 +152,7 @@ class Pipeline:
         self._last_t: dict[str, float] = {}
         self._n_det: dict[str, int] = {}
         self._pose_interval_s = float(pose_interval_s)
+        self.writes = HeldWrites(store, self._publish_now, self.commits.lock)
         self._fresh_tracking()
         self._flush_timer: threading.Timer | None = None
         self._inline: dict[str, Any] | None = None
@@ -239,6 +241,9 @@ class Pipeline:
 
     def _fresh_tracking(self) -> None:
         """The tracker, its reorder buffer, track bodies, pose book and events, all new."""
+        self.writes.close()  # what it held is rebuilt from the durable state
+        #: Derived writes in order; those a full store refused wait for space.
+        self.writes = HeldWrites(self.store, self._publish_now, self.commits.lock)
         self.buffer = ReorderBuffer(self.reorder_lag_s)
         self.feed = TrackerFeed(build_tracker(self.method, roads=self.site.roads), self.buffer)
         self.bodies = TrackBodies(self.site.frame)
@@ -533,17 +538,20 @@ class Pipeline:
                     return
                 events = self.announcer.flush(self.pose_book.newest)
                 if events:
-                    store_and_publish(
-                        self.store, self.publish, [], [], events, [], fence=self.fence
-                    )
+                    self.writes.write([], [], events, [], fence=self.fence)
                 self._arm_pose_flush()
         except Exception:  # noqa: BLE001 - a timer thread: log, never raise
             log.exception("sending held-back sensor_pose messages failed")
+
+    def _publish_now(self, messages: list[Any]) -> None:
+        """Hand ``messages`` to :attr:`publish` as it is now (it may be replaced)."""
+        self.publish(messages)
 
     def close(self) -> None:
         """Stop the pose flush timer (before the store closes)."""
         with self._lock:
             self._closed = True
+            self.writes.close()
             if self._flush_timer is not None:
                 self._flush_timer.cancel()
                 self._flush_timer = None
@@ -591,7 +599,7 @@ class Pipeline:
         if not pending and not acks:  # poses alone, no detection due: nothing to track
             moved = self.announcer.due(posed, self.pose_book.newest)
             if moved:
-                store_and_publish(self.store, self.publish, [], [], moved, [], fence=self.fence)
+                self.writes.write([], [], moved, [], fence=self.fence)
             self._arm_pose_flush()
             return
         dets = [d for _, d in pending]
@@ -650,9 +658,7 @@ class Pipeline:
             if n_no_pose:
                 ack["no_pose"] = sum(1 for i in ack["detection_ids"] if i in n_no_pose)
             events.append(("event", ingest_message(ack, n_fixes, t)))
-        store_and_publish(
-            self.store,
-            self.publish,
+        self.writes.write(
             rows,
             track_rows,
             events,
