@@ -201,7 +201,7 @@ def run_dask(
     progress : bool
         Show Dask's progress bar (waits for the end).
     """
-    from distributed import as_completed, wait
+    from distributed import as_completed
 
     from .fused import job_rows
 
@@ -221,16 +221,16 @@ def run_dask(
 
         dask_progress(every)  # a text bar on stdout, or a widget in a notebook
     notes: dict[str, Any] = {}
-    if kill_after is not None:
-        done = 0
-        for _ in as_completed(every):
-            done += 1
-            if on_done is not None:
-                on_done(done)
-            if done == kill_after:
-                notes["killed_worker"] = _kill_one_worker(client)
-    wait(every)
-    got_loose, got = client.gather([loose, [chains[j] for j in range(len(plan.jobs))]])
+    value: dict[str, Any] = {}
+    # each result is fetched as its task ends, so the client's unpickling overlaps the run
+    for done, (fut, res) in enumerate(as_completed(every, with_results=True), start=1):
+        value[fut.key] = res
+        if on_done is not None:
+            on_done(done)
+        if done == kill_after:
+            notes["killed_worker"] = _kill_one_worker(client)
+    got_loose = [value[f.key] for f in loose]
+    got = [[value[f.key] for f in chains[j]] for j in range(len(plan.jobs))]
     geo: list[GeoResult] = list(got_loose)
     tracks: list[list[Any]] = [[] for _ in plan.segments]
     for job, results in zip(plan.jobs, got, strict=True):
