@@ -3,13 +3,17 @@
 ``demtrack bench reprocess [--site DIR --archive DIR --detections N --workers 1,2,4]``:
 the synthetic archive (:mod:`demtrack.reprocess.synth`; made in a temporary folder
 unless ``--archive`` and ``--site12`` are given) reprocessed once by the local engine and
-once per worker count on a fresh ``LocalCluster``. Each cluster is warmed first (a run
-of a small piece of the archive: worker imports, numba's cached kernels, the site
-loaded), then timed from submission to the last result. Printed per run: seconds,
-detections/s, speed-up over one worker, and the share of time in scheduling overhead,
-``1 - (sum of task compute times) / (wall time x workers)`` from Dask's task stream
-(so idle workers at the end of a run count as overhead too); and whether every run's
-content hash equals the local one's.
+once per worker count on a fresh ``LocalCluster``. Every engine is warmed first, untimed
+and alike: this process before the local run, and each worker of a cluster
+(``client.run``) before its run, geolocate and track the archive's first 2,000 rows
+(:func:`demtrack.reprocess.fused.warm_up`: the site loaded, numba's cached kernels, the
+tracker's imports); then each run is timed from submission to the last result. Printed
+per run: seconds, detections/s, speed-up over one worker, and the share of time in
+scheduling overhead, ``1 - (sum of task compute times) / (wall time x workers)`` from
+Dask's task stream (so idle workers at the end of a run count as overhead too);
+``cpu/core``, the CPU seconds the run's processes got per worker and wall second (1.00:
+each worker had a core to itself; below that, other processes took the cores, which a
+shared machine shows); and whether every run's content hash equals the local one's.
 """
 
 from __future__ import annotations
@@ -37,19 +41,19 @@ def _timed_dask(site_dir: str, read, plan, method: str, workers: int, out: Path)
     from distributed import get_task_stream
 
     from demtrack.reprocess.engines import dask_client, run_dask
+    from demtrack.reprocess.fused import warm_up
     from demtrack.reprocess.outputs import write_outputs
-    from demtrack.reprocess.plan import make_plan
 
-    warm_rows = read.table.slice(0, min(2000, read.table.num_rows))
-    warm_plan = make_plan(warm_rows, list(plan.groups))
     t0 = time.perf_counter()
     with dask_client(workers, None) as client:
         t_start = time.perf_counter() - t0
-        run_dask(warm_plan, warm_rows, site_dir, method, client)
+        client.run(warm_up, site_dir, method, _warm_rows(read))  # every worker, untimed
         with get_task_stream(client) as stream:
+            cpu0 = client.run(time.process_time)
             t1 = time.perf_counter()
             result = run_dask(plan, read.table, site_dir, method, client)
             wall = time.perf_counter() - t1
+            cpu1 = client.run(time.process_time)
         compute = 0.0
         for task in stream.data:
             for part in task.get("startstops", ()):
@@ -60,7 +64,12 @@ def _timed_dask(site_dir: str, read, plan, method: str, workers: int, out: Path)
         info={"method": method}, run={},
     )  # fmt: skip
     overhead = max(0.0, 1.0 - compute / (wall * workers)) if wall > 0 else 0.0
-    return wall, t_start, overhead, manifest["content_hash"]
+    cpu = sum(cpu1[w] - cpu0.get(w, 0.0) for w in cpu1)
+    return wall, t_start, overhead, cpu / (wall * workers), manifest["content_hash"]
+
+
+def _warm_rows(read):  # noqa: ANN001, ANN202  (what every engine runs untimed first)
+    return read.table.slice(0, min(2000, read.table.num_rows))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -100,30 +109,35 @@ def main(argv: list[str] | None = None) -> int:
             f"plan: {len(plan.groups)} sensor groups, {len(plan.segments)} segments,"
             f" {len(plan.parts)} geolocation parts ({time.perf_counter() - t0:.1f} s)"
         )
-        t1 = time.perf_counter()
+        from demtrack.reprocess.fused import warm_up
+
+        warm_up(site_dir, args.method, _warm_rows(read))  # as each Dask worker does
+        c1, t1 = time.process_time(), time.perf_counter()
         local = run_local(plan, read.table, site_dir, args.method)
         t_local = time.perf_counter() - t1
+        share_local = (time.process_time() - c1) / t_local
         ref = write_outputs(
             tmpd / "local", local, plan, tracks_name="tracks.geojson",
             write_tracks=_write(site_dir), info={"method": args.method}, run={},
         )["content_hash"]  # fmt: skip
         print(f"method {args.method}; the machine may be shared: figures are noisy, ratios")
-        print("engine     workers   seconds   det/s  speed-up  overhead  hash")
+        print("engine     workers   seconds   det/s  speed-up  overhead  cpu/core  hash")
         print(
             f"local            -  {t_local:8.1f}  {n / t_local:6.0f}"
-            f"         -         -  {ref[:12]}"
+            f"         -         -  {share_local:7.2f}  {ref[:12]}"
         )
         base_wall = None
         same = True
         for w in counts:
-            wall, t_start, overhead, digest = _timed_dask(
+            wall, t_start, overhead, share, digest = _timed_dask(
                 site_dir, read, plan, args.method, w, tmpd / f"dask{w}"
             )
             base_wall = wall if base_wall is None else base_wall
             same &= digest == ref
             print(
                 f"dask       {w:7d}  {wall:8.1f}  {n / wall:6.0f}  {base_wall / wall:7.2f}x"
-                f"  {100 * overhead:7.1f}%  {digest[:12]}  (cluster start {t_start:.1f} s)"
+                f"  {100 * overhead:7.1f}%  {share:7.2f}  {digest[:12]}"
+                f"  (cluster start {t_start:.1f} s)"
             )
         print(f"every content hash equals the local run's: {'yes' if same else 'NO'}")
     return 0 if same else 1

@@ -1,10 +1,12 @@
 """Engines that run a :class:`~.plan.Plan`: in this process, or on a Dask cluster.
 
-Both call the same task functions (:mod:`.tasks`) on the same inputs, and each segment's
-windows in the same order (a window's task waits for the one before), so their results
-are equal. On Dask, geolocation parts run in parallel, and tracking jobs (a long
-segment's chain of windows, or a pack of short segments) run in parallel. A worker lost
-mid-run costs its tasks a rerun (Dask recomputes what it held, from the inputs the client keeps).
+The local engine geolocates the plan's parts, then tracks its jobs (each segment's windows
+in order). On Dask, a job is one task that geolocates its own detections and tracks them
+(:mod:`.fused`: no fixes cross between workers, no job waits for another's geolocation),
+a long segment's windows a chain of such tasks (each waits for the one before), the
+longest jobs first; both call the same task functions (:mod:`.tasks`), and geolocation
+does not depend on the batching, so their results are equal. A worker lost mid-run costs
+its tasks a rerun (Dask recomputes what it held, from the inputs the client keeps).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
 import pyarrow as pa
 
 from demtrack.core.errors import InputFileError
@@ -134,6 +137,46 @@ def _kill_one_worker(client: Any) -> str:
     return str(addr)
 
 
+def _submit_fused(
+    plan: Plan,
+    table: pa.Table,
+    seg_rows: tuple[Any, ...],
+    run: tuple[str, str, Any],
+    order: list[int],
+) -> dict[int, list[Any]]:
+    """Each job's task(s), longest job first (Dask runs higher ``priority`` first)."""
+    from .fused import track_job, track_window_rows
+
+    site_dir, method, client = run
+    chains: dict[int, list[Any]] = {}
+    for j in order:
+        job = plan.jobs[j]
+        n_rows = sum(len(seg_rows[s]) for s in job)
+        if not _chained(plan, job):
+            ids = np.concatenate([seg_rows[s] for s in job])
+            chains[j] = [
+                client.submit(
+                    track_job, site_dir, method, _specs(plan, job), table.take(ids), ids,
+                    key=f"track-{plan.segments[job[0]].key}-n{len(job)}", pure=False,
+                    retries=2, priority=n_rows,
+                )
+            ]  # fmt: skip
+            continue
+        seg = plan.segments[job[0]]
+        rows, t = seg_rows[job[0]], table["t_s"].to_numpy(zero_copy_only=False)
+        prev = None
+        chains[j] = []
+        for w, (lo, hi) in enumerate(seg.windows):
+            ids = rows[(t[rows] >= lo) & (t[rows] < hi)]
+            prev = client.submit(
+                track_window_rows, site_dir, method, seg.seed, prev, table.take(ids), ids,
+                (lo, hi), w == len(seg.windows) - 1, (seg.t_first, seg.t_last),
+                key=f"track-{seg.key}-w{w}", pure=False, retries=2, priority=n_rows,
+            )  # fmt: skip
+            chains[j].append(prev)
+    return chains
+
+
 def run_dask(
     plan: Plan,
     table: pa.Table,
@@ -146,88 +189,59 @@ def run_dask(
     progress: bool = False,
     on_done: Callable[[int], None] | None = None,
 ) -> RunResult:
-    """Run the plan on ``client``'s cluster.
+    """Run the plan on ``client``'s cluster: one task per job (:mod:`.fused`).
 
     Parameters
     ----------
     shuffle_seed : int, optional
-        Submit the geolocation parts, and the segments, in an order shuffled by this seed
-        (the results must not change: tested).
+        Submit the jobs in an order shuffled by this seed (the results must not change:
+        tested).
     kill_after : int, optional
         Once this many tasks have finished, kill one worker's process (tested).
     progress : bool
         Show Dask's progress bar (waits for the end).
     """
-    from distributed import as_completed, wait
+    from distributed import as_completed
 
-    order = list(range(len(plan.parts)))
+    from .fused import job_rows
+
     job_order = list(range(len(plan.jobs)))
     if shuffle_seed is not None:
-        rng = random.Random(shuffle_seed)
-        rng.shuffle(order)
-        rng.shuffle(job_order)
-    geo: dict[int, Any] = {}
-    for k in order:
-        rows, ids = _part_args(plan, table, k)
-        geo[k] = client.submit(
-            geolocate_part, site_dir, rows, ids, key=plan.parts[k].key, pure=False, retries=2
-        )
-    chains: dict[int, list[Any]] = {}
-    for j in job_order:
-        job = plan.jobs[j]
-        if not _chained(plan, job):
-            parts = [geo[k] for k in _job_parts(plan, job)]
-            chains[j] = [
-                client.submit(
-                    track_segments,
-                    site_dir,
-                    method,
-                    _specs(plan, job),
-                    parts,
-                    key=f"track-{plan.segments[job[0]].key}-n{len(job)}",
-                    pure=False,
-                    retries=2,
-                )  # fmt: skip
-            ]
-            continue
-        seg = plan.segments[job[0]]
-        prev = None
-        futs = []
-        for w, window in enumerate(seg.windows):
-            parts = [geo[k] for k in _window_parts(plan, seg.parts, window)]
-            prev = client.submit(
-                track_window, site_dir, method, seg.seed, prev, parts, window,
-                w == len(seg.windows) - 1, (seg.t_first, seg.t_last),
-                key=f"track-{seg.key}-w{w}", pure=False, retries=2,
-            )  # fmt: skip
-            futs.append(prev)
-        chains[j] = futs
-    every = list(geo.values()) + [f for c in chains.values() for f in c]
+        random.Random(shuffle_seed).shuffle(job_order)
+    rows = job_rows(plan, table)
+    chains = _submit_fused(plan, table, rows.segments, (site_dir, method, client), job_order)
+    loose = [
+        client.submit(geolocate_part, site_dir, *_part_args(plan, table, k),
+                      key=plan.parts[k].key, pure=False, retries=2)
+        for k in rows.loose_parts
+    ]  # fmt: skip
+    every = loose + [f for c in chains.values() for f in c]
     if progress:
         from distributed import progress as dask_progress
 
         dask_progress(every)  # a text bar on stdout, or a widget in a notebook
     notes: dict[str, Any] = {}
-    if kill_after is not None:
-        done = 0
-        for _ in as_completed(every):
-            done += 1
-            if on_done is not None:
-                on_done(done)
-            if done == kill_after:
-                notes["killed_worker"] = _kill_one_worker(client)
-    wait(every)
-    geo_results = [geo[k].result() for k in range(len(plan.parts))]
+    value: dict[str, Any] = {}
+    # each result is fetched as its task ends, so the client's unpickling overlaps the run
+    for done, (fut, res) in enumerate(as_completed(every, with_results=True), start=1):
+        value[fut.key] = res
+        if on_done is not None:
+            on_done(done)
+        if done == kill_after:
+            notes["killed_worker"] = _kill_one_worker(client)
+    got_loose = [value[f.key] for f in loose]
+    got = [[value[f.key] for f in chains[j]] for j in range(len(plan.jobs))]
+    geo: list[GeoResult] = list(got_loose)
     tracks: list[list[Any]] = [[] for _ in plan.segments]
-    for j, job in enumerate(plan.jobs):
-        got = client.gather(chains[j])
+    for job, results in zip(plan.jobs, got, strict=True):
+        geo.extend(g for g, _ in results)
         if _chained(plan, job):
-            tracks[job[0]] = segment_tracks(got)
+            tracks[job[0]] = segment_tracks([r for _, r in results])
         else:
-            for s, seg_tracks in zip(job, got[0], strict=True):
+            for s, seg_tracks in zip(job, results[0][1], strict=True):
                 tracks[s] = seg_tracks
     if "killed_worker" in notes:
         notes["killed_worker_gone"] = (
             notes["killed_worker"] not in client.scheduler_info()["workers"]
         )
-    return RunResult(geo_results, tracks, notes)
+    return RunResult(geo, tracks, notes)

@@ -15,7 +15,8 @@ settings - never of the engine or the number of workers:
   UTC time (chunks start at multiples of ``chunk_s`` after the UNIX epoch);
 * a tracking **job** is one task's work: a segment longer than one window alone (its
   windows chained, one task each), or consecutive one-window segments of a group
-  packed until they hold ``job_rows`` detections (they are tracked one after the
+  packed until they hold ``job_rows`` detections (1,000: a few tasks per worker even
+  for a small archive; they are tracked one after the
   other, each by its own tracker, so packing changes nothing but the task count).
 """
 
@@ -32,7 +33,7 @@ from demtrack.core.errors import InputFileError
 __all__ = ["GeoPart", "Plan", "Segment", "make_plan", "segment_seed", "split_quiet"]
 
 #: Detections a job of one-window segments holds at least (unless the group ends).
-JOB_ROWS = 4000
+JOB_ROWS = 1000
 
 
 @dataclass(frozen=True)
