@@ -86,17 +86,31 @@ def vehicle_run_pipeline(site_dir: Path, tmp: Path, until_s: float):
     return site, p, records
 
 
+def time_batches(records: list[dict[str, Any]], span_s: float) -> list[list[dict[str, Any]]]:
+    """Time-ordered detection ``records`` cut into batches each spanning under ``span_s``."""
+    out: list[list[dict[str, Any]]] = []
+    for r in records:
+        if out and r["t"] < out[-1][0]["t"] + span_s:
+            out[-1].append(r)
+        else:
+            out.append([r])
+    return out
+
+
 def post_in_time_batches(client, records: list[dict[str, Any]], span_s: float = 0.5) -> None:
-    """POST time-ordered detection ``records`` as batches each spanning under ``span_s``;
-    every batch must be accepted."""
-    k = 0
-    while k < len(records):
-        j = k
-        while j < len(records) and records[j]["t"] < records[k]["t"] + span_s:
-            j += 1
-        r = client.post("/api/detections", headers=AUTH, json={"detections": records[k:j]})
+    """POST time-ordered detection ``records`` as :func:`time_batches`; every batch must be
+    accepted."""
+    for batch in time_batches(records, span_s):
+        r = client.post("/api/detections", headers=AUTH, json={"detections": batch})
         assert r.status_code == 200
-        k = j
+
+
+def stored_messages(store) -> list[dict[str, Any]]:
+    """Every message of ``store``'s event log, in sequence order."""
+    out: list[dict[str, Any]] = []
+    while rows := store.events_since(out[-1]["seq"] if out else 0, 5000):
+        out += rows
+    return out
 
 
 def start_server(

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from server_helpers import vehicle_run_pipeline
+from server_helpers import stored_messages, time_batches, vehicle_run_pipeline
 
 from demtrack.server.ingest.pipeline import Pipeline
 from demtrack.server.live_events import LiveEventParams
@@ -25,16 +25,6 @@ pytestmark = pytest.mark.timeout(600)
 UNTIL_S = 40.0
 PARAMS = LiveEventParams(window_s=15.0)
 NO_LIMIT = 1073741823
-
-
-def _batches(records: list[dict[str, Any]], span_s: float = 2.0) -> list[list[dict[str, Any]]]:
-    out: list[list[dict[str, Any]]] = []
-    for r in records:
-        if out and r["t"] < out[-1][0]["t"] + span_s:
-            out[-1].append(r)
-        else:
-            out.append([r])
-    return out
 
 
 def _pipeline(site, path: Path, published: list | None = None) -> Pipeline:
@@ -47,14 +37,11 @@ def _pipeline(site, path: Path, published: list | None = None) -> Pipeline:
 def _state(store: Store) -> tuple[list, list, list, list]:
     """Fixes, tracks, activity and the stream's event log (less ``ingest`` counts)."""
     fixes = store.fixes(0, 10**6)
-    stream, after = [], 0
-    while rows := store.events_since(after, 5000):
-        after = rows[-1]["seq"]
-        stream += [
-            {k: v for k, v in m.items() if k != "seq"}
-            for m in rows
-            if not (m["type"] == "event" and m.get("kind") == "ingest")
-        ]
+    stream = [
+        {k: v for k, v in m.items() if k != "seq"}
+        for m in stored_messages(store)
+        if not (m["type"] == "event" and m.get("kind") == "ingest")
+    ]
     return fixes, store.tracks(), store.activity(), stream
 
 
@@ -67,7 +54,7 @@ def scenario(sample_site_dir, tmp_path_factory):
     tmp = tmp_path_factory.mktemp("ref")
     site, p, records = vehicle_run_pipeline(sample_site_dir, tmp, UNTIL_S)
     p.store.close()
-    batches = _batches(records)
+    batches = time_batches(records, 2.0)
     ref = _pipeline(site, tmp / "ref.sqlite3")
     for b in batches:
         ref.ingest(b)

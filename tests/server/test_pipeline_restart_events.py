@@ -9,10 +9,9 @@ oracle is that uninterrupted run. ``test_e2e`` does the same with a real SIGKILL
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import pytest
-from server_helpers import vehicle_run_pipeline
+from server_helpers import stored_messages, time_batches, vehicle_run_pipeline
 
 from demtrack.server.ingest.group_commit import Request, commit_group
 from demtrack.server.ingest.pipeline import Pipeline
@@ -24,16 +23,6 @@ UNTIL_S = 60.0
 PARAMS = LiveEventParams(window_s=15.0)
 
 
-def _batches(records: list[dict[str, Any]], span_s: float = 0.5) -> list[list[dict[str, Any]]]:
-    out: list[list[dict[str, Any]]] = []
-    for r in records:
-        if out and r["t"] < out[-1][0]["t"] + span_s:
-            out[-1].append(r)
-        else:
-            out.append([r])
-    return out
-
-
 def _pipeline(site, path: Path) -> Pipeline:
     p = Pipeline(site, Store(path), "kalman", lambda _m: None, events=PARAMS)
     p.start()
@@ -43,15 +32,11 @@ def _pipeline(site, path: Path) -> Pipeline:
 def _events(store: Store) -> tuple[list[dict], list[tuple]]:
     """The activity table, and the stream's detected-event messages (not ``ingest``)."""
     activity = store.activity()
-    stream = []
-    after = 0
-    while rows := store.events_since(after, 5000):
-        after = rows[-1]["seq"]
-        stream += [
-            (m["kind"], m["t_s"], m["text"], m.get("event"))
-            for m in rows
-            if m["type"] == "event" and m["kind"] != "ingest"
-        ]
+    stream = [
+        (m["kind"], m["t_s"], m["text"], m.get("event"))
+        for m in stored_messages(store)
+        if m["type"] == "event" and m["kind"] != "ingest"
+    ]
     return activity, stream
 
 
@@ -60,7 +45,7 @@ def scenario(sample_site_dir, tmp_path_factory):
     tmp = tmp_path_factory.mktemp("ref")
     site, p, records = vehicle_run_pipeline(sample_site_dir, tmp, UNTIL_S)
     p.store.close()
-    batches = _batches(records)
+    batches = time_batches(records, 0.5)
     ref = _pipeline(site, tmp / "ref.sqlite3")
     for b in batches:
         ref.ingest(b)
