@@ -85,41 +85,23 @@ class HeldWrites:
         fence: Any = None,
     ) -> bool:
         """Write one batch's derived rows after those held (lock held); False if held."""
+        w = _Write(fixes, tracks, events, activity, stored_hook, fence)
         if not self.held:  # the common case: no queue, one call
             try:
-                store_and_publish(
-                    self.store,
-                    self.publish,
-                    fixes,
-                    tracks,
-                    events,
-                    activity,
-                    stored_hook,
-                    fence=fence,
-                )
+                self._store(w)
                 return True
             except StoreUnavailableError as exc:
-                self._hold(_Write(fixes, tracks, events, activity, stored_hook, fence), exc)
+                self._hold(w, exc)
                 return False
-        self.held.append(_Write(fixes, tracks, events, activity, stored_hook, fence))
+        self.held.append(w)
         return self.flush()
 
     def flush(self) -> bool:
         """Write the held writes in order (lock held); True when none is left."""
         n = len(self.held)
         while self.held:
-            w = self.held[0]
             try:
-                store_and_publish(
-                    self.store,
-                    self.publish,
-                    w.fixes,
-                    w.tracks,
-                    w.events,
-                    w.activity,
-                    w.stored_hook,
-                    fence=w.fence,
-                )
+                self._store(self.held[0])
             except StoreUnavailableError as exc:
                 log.debug("held derived writes still refused: %s", exc)
                 self._arm()
@@ -129,6 +111,18 @@ class HeldWrites:
             log.warning("the store writes again: %d held derived write(s) stored", n)
             self._delay = self.retry_s
         return True
+
+    def _store(self, w: _Write) -> None:
+        store_and_publish(
+            self.store,
+            self.publish,
+            w.fixes,
+            w.tracks,
+            w.events,
+            w.activity,
+            w.stored_hook,
+            fence=w.fence,
+        )
 
     def _hold(self, w: _Write, exc: StoreUnavailableError) -> None:
         self.held.append(w)
