@@ -70,19 +70,12 @@ def _geolocate(site_dir: str, rows: pa.Table, det_ids: np.ndarray) -> GeoResult:
     So a sensor with a single detection here takes the part's path for one detection
     (numpy's single-row product: :func:`.tasks.geolocate_part`), whatever else the rows hold.
     """
-    from .fix_columns import FixColumns
-
     sensor = np.array(rows["sensor"].to_pylist(), dtype=object)
     results = []
     for sid in sorted(set(sensor.tolist())):
         mine = np.flatnonzero(sensor == sid)
         results.append(geolocate_part(site_dir, rows.take(mine), det_ids[mine]))
-    counts: dict[str, int] = {}
-    for r in results:
-        for k, v in r.counts.items():
-            counts[k] = counts.get(k, 0) + v
-    fixes = FixColumns.concat([r.fixes for r in results]) if results else FixColumns.empty()
-    return GeoResult(fixes, counts)
+    return GeoResult.merged(results)
 
 
 def track_job(

@@ -21,8 +21,8 @@ import pyarrow.parquet as pq
 from demtrack.core.tracking import Track
 
 from .engines import RunResult
-from .fix_columns import FixColumns
 from .plan import Plan
+from .tasks import GeoResult
 
 __all__ = ["content_hash", "file_sha256", "merged_tracks", "write_outputs"]
 
@@ -82,23 +82,20 @@ def write_outputs(
     tracks = merged_tracks(result)
     tracks_path = out_dir / tracks_name
     write_tracks(tracks, tracks_path)
-    fixes = FixColumns.concat([g.fixes for g in result.geo]).sorted()
+    geo = GeoResult.merged(result.geo)
+    fixes = geo.fixes.sorted()
     pq.write_table(fixes.to_arrow(), out_dir / FIXES_NAME, compression="zstd")
     names = [tracks_name, FIXES_NAME]
     if tracks_path.with_suffix(".csvt").exists() and tracks_path.suffix.lower() == ".csv":
         names.append(tracks_path.with_suffix(".csvt").name)
     files = {n: file_sha256(out_dir / n) for n in names}
-    skipped: dict[str, int] = {}
-    for g in result.geo:
-        for k, v in g.counts.items():
-            skipped[k] = skipped.get(k, 0) + v
     manifest = {
         "format": "demtrack.reprocess",
         "version": 1,
         **info,
         "n_fixes": len(fixes),
         "n_tracks": len(tracks),
-        "geolocation_skipped": dict(sorted(skipped.items())),
+        "geolocation_skipped": dict(sorted(geo.counts.items())),
         "groups": [list(g) for g in plan.groups],
         "n_segments": len(plan.segments),
         "n_jobs": len(plan.jobs),

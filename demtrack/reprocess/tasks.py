@@ -42,6 +42,15 @@ class GeoResult:
     fixes: FixColumns
     counts: dict[str, int] = field(default_factory=dict)
 
+    @classmethod
+    def merged(cls, results: Sequence[GeoResult]) -> GeoResult:
+        """One result of several: their fixes in the given order, their counts summed."""
+        counts: dict[str, int] = {}
+        for r in results:
+            for k, v in r.counts.items():
+                counts[k] = counts.get(k, 0) + v
+        return cls(FixColumns.concat([r.fixes for r in results]), counts)
+
 
 def geolocate_part(site_dir: str, rows: pa.Table, det_ids: np.ndarray) -> GeoResult:
     """Geolocate archive rows (one sensor, in time order); ``det_ids`` are their ids.
