@@ -70,8 +70,11 @@ _FENCE = "SELECT token FROM site_lease WHERE site_id = %s FOR SHARE"
 class FencedOut(StoreUnavailableError):
     """A derived write by a process whose lease token is no longer the site's current one.
 
-    The write's transaction was rolled back: another process tracks the site now.
+    The write's transaction was rolled back: another process tracks the site now. It can
+    never pass (its fence holds the old token), so it is not held for a retry.
     """
+
+    retryable = False
 
 
 class SiteLease:

@@ -10,6 +10,12 @@ written) is held, in order, and tried again, with every later one behind it, at 
 write and on a timer (``retry_s``, doubling up to ``max_retry_s``) until space returns. The
 rows and messages are the ones computed when the batch was processed, so the store ends
 as an uninterrupted run leaves it; the stream's messages go out late, in their order.
+
+A refusal that can never pass (``retryable`` False: a write fenced out of a lost cluster
+lease, whose fence holds the old token) is not held: that write and every one held behind
+it (made under the same lease) are dropped, since the process that holds the lease now
+derives them from the durable state (the batches' detections are stored and acknowledged;
+the lease's own check has already stopped this process tracking).
 """
 
 from __future__ import annotations
@@ -73,6 +79,8 @@ class HeldWrites:
         self._delay = self.retry_s
         self._timer: threading.Timer | None = None
         self._closed = False
+        #: Derived writes dropped because they could never pass (fenced out).
+        self.n_dropped = 0
 
     def write(
         self,
@@ -84,25 +92,38 @@ class HeldWrites:
         *,
         fence: Any = None,
     ) -> bool:
-        """Write one batch's derived rows after those held (lock held); False if held."""
+        """Write one batch's derived rows after those held (lock held).
+
+        False if they were not stored now: held for a retry, or dropped (a refusal that
+        can never pass).
+        """
         w = _Write(fixes, tracks, events, activity, stored_hook, fence)
         if not self.held:  # the common case: no queue, one call
             try:
                 self._store(w)
                 return True
             except StoreUnavailableError as exc:
+                if not exc.retryable:
+                    self._drop(w, exc)
+                    return False
                 self._hold(w, exc)
                 return False
         self.held.append(w)
         return self.flush()
 
     def flush(self) -> bool:
-        """Write the held writes in order (lock held); True when none is left."""
+        """Write the held writes in order (lock held); True when all were stored.
+
+        False when some are still held, or were dropped (a refusal that can never pass).
+        """
         n = len(self.held)
         while self.held:
             try:
                 self._store(self.held[0])
             except StoreUnavailableError as exc:
+                if not exc.retryable:
+                    self._drop(self.held[0], exc)
+                    return False
                 log.debug("held derived writes still refused: %s", exc)
                 self._arm()
                 return False
@@ -123,6 +144,17 @@ class HeldWrites:
             w.stored_hook,
             fence=w.fence,
         )
+
+    def _drop(self, w: _Write, exc: StoreUnavailableError) -> None:
+        """Forget ``w`` and every held write (none can pass: ``exc`` is not retryable)."""
+        n = len(self.held) + (0 if self.held and self.held[0] is w else 1)
+        log.warning("%d derived write(s) dropped, never to pass: %s", n, exc)
+        self.held.clear()
+        self.n_dropped += n
+        self._delay = self.retry_s
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
 
     def _hold(self, w: _Write, exc: StoreUnavailableError) -> None:
         self.held.append(w)

@@ -41,7 +41,13 @@ log = logging.getLogger("demtrack.server")
 
 
 class StoreUnavailableError(RuntimeError):
-    """A write the store cannot make now (nothing of it was committed)."""
+    """A write the store cannot make now (nothing of it was committed).
+
+    ``retryable``: whether the same write may pass later (space returns, the server comes
+    back); False where it never can (a write fenced out of a lost cluster lease).
+    """
+
+    retryable = True
 
 
 class StoreFullError(StoreUnavailableError):
