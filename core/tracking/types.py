@@ -349,13 +349,6 @@ class Fix:
         d_all = rows.direction
         for r in range(n):
             lo, hi = offsets[r], offsets[r + 1]
-            d_r = d_all[r]
-            # np.linalg.norm of a 1-D float array is sqrt(x.dot(x)): the same bits, one call
-            norm = math.sqrt(d_r.dot(d_r))
-            if norm == 0.0:
-                raise TrackingError("direction_enu must be non-zero")
-            direction = d_r / norm
-            direction.setflags(write=False)
             out.append(
                 cls._trusted(
                     float(t_s[r]),
@@ -363,7 +356,7 @@ class Fix:
                     obj_cls[r],  # type: ignore[arg-type]
                     int(detection_index[r]),
                     rows.origin[r],
-                    direction,
+                    _unit(d_all[r]),
                     rows.hits[lo:hi],
                     rows.sigma[lo:hi],
                     rows.road[r] if rows.has_road[r] else None,
@@ -372,6 +365,28 @@ class Fix:
                 )
             )
         return out
+
+    def reindexed(self, detection_index: int) -> Fix:
+        """This fix under another detection index, as :meth:`from_arrays` makes it again.
+
+        The fix :meth:`from_arrays` gives of this fix's own values (its direction
+        normalised once more, its covariances symmetrised once more: a no-op), bit for
+        bit, without the stacking and checks: what a stored fix body gives back when the
+        fix has hits. The arrays are shared (they are read-only).
+        """
+        return Fix._trusted(
+            self.t_s,
+            self.sensor,
+            self.cls,
+            int(detection_index),
+            self.origin_enu,
+            _unit(self.direction_enu),
+            self.hits_enu,
+            self.hit_sigma_m,
+            self.road_hit_enu,
+            self.score,
+            self.hit_cov_en_m2,
+        )
 
     @property
     def n_hits(self) -> int:
@@ -383,6 +398,18 @@ class Fix:
         if self.hit_cov_en_m2 is not None:
             return self.hit_cov_en_m2
         return self.hit_sigma_m[:, None, None] ** 2 * np.eye(2)[None]
+
+
+def _unit(d: np.ndarray) -> np.ndarray:
+    """``d`` (shape (3,), contiguous float64) over its length, read-only: the stacked fix
+    constructor's normalisation (one arithmetic, so a re-made fix keeps every bit)."""
+    # np.linalg.norm of a 1-D float array is sqrt(x.dot(x)): the same bits, one call
+    norm = math.sqrt(d.dot(d))
+    if norm == 0.0:
+        raise TrackingError("direction_enu must be non-zero")
+    unit = d / norm
+    unit.setflags(write=False)
+    return unit
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,12 +1,15 @@
 """Fix bodies <-> tracker fixes: the one way a stored fix becomes the tracker's input.
 
 A fix's stored body (the ``fixes`` table, the ``fix`` stream message) is made here from
-the builder's :class:`~demtrack.core.tracking.types.Fix`, and the tracker's fix is made
-back from that body by :func:`fixes_from_bodies` - in the live run and in the start-up
-replay alike, through the one validating, vectorised constructor
-:meth:`Fix.from_arrays <demtrack.core.tracking.types.Fix.from_arrays>`. The body holds
-the fix's own floats (``tolist`` and JSON keep every bit), so a restart hands the tracker
-the very fixes the live run did: identical tracks by construction.
+the builder's :class:`~demtrack.core.tracking.types.Fix`. The start-up replay makes the
+tracker's fix back from that body by :func:`fixes_from_bodies`, through the one
+validating, vectorised constructor
+:meth:`Fix.from_arrays <demtrack.core.tracking.types.Fix.from_arrays>`; the live run
+makes the same fix from the builder's own (:func:`tracker_fixes`, with
+:meth:`Fix.reindexed <demtrack.core.tracking.types.Fix.reindexed>`: the same arithmetic,
+without going through lists). The body holds the fix's own floats (``tolist`` and JSON
+keep every bit), so a restart hands the tracker the very fixes the live run did:
+identical tracks (the oracle test compares the two fixes bit for bit).
 
 Body hits hold their geodetic fields (``lat_deg``, ``lon_deg``, ``h_m``) in place but
 None when made: the pipeline fills them from the batch's one geodetic conversion.
@@ -21,7 +24,7 @@ import numpy as np
 
 from demtrack.core.tracking.types import Detection, Fix
 
-__all__ = ["fix_bodies", "fix_from_body", "fixes_from_bodies", "hit_body"]
+__all__ = ["fix_bodies", "fix_from_body", "fixes_from_bodies", "hit_body", "tracker_fixes"]
 
 #: Placeholders for rows :meth:`Fix.from_arrays` does not read (no road point, no covariance).
 _NO_ROAD = [0.0, 0.0, 0.0]
@@ -50,53 +53,91 @@ def fix_bodies(
     """The stored body of each detection's fix (None: no fix), geodetic fields unfilled.
 
     ``fixes``: :func:`~demtrack.core.geolocation.fix_builder.build_fixes` of the
-    detections of ``pending`` (``detection_index`` = position in ``pending``). The second
-    value, ``[(points (k, 3), hit dicts)]`` (empty when there is no hit), is what fills
-    the hits' ``lat_deg``, ``lon_deg`` and ``h_m`` before the bodies are used.
+    detections of ``pending`` (``detection_index`` = position in ``pending``, increasing).
+    The second value, ``[(points (k, 3), hit dicts)]`` (empty when there is no hit), is
+    what fills the hits' ``lat_deg``, ``lon_deg`` and ``h_m`` before the bodies are used.
+    Every fix's floats reach the bodies through one ``tolist`` per array kind.
     """
-    by_index = {f.detection_index: f for f in fixes}
-    chunks = []
-    for f in fixes:
-        chunks.append(f.hits_enu)
-        if f.road_hit_enu is not None:
-            chunks.append(f.road_hit_enu[None, :])
-    dicts: list[dict[str, Any]] = []
-    out: list[dict[str, Any] | None] = []
-    for i, (det_id, d) in enumerate(pending):
-        fix = by_index.get(i)
-        if fix is None:
-            out.append(None)
-            continue
-        hits = []
-        covs = [None] * fix.n_hits if fix.hit_cov_en_m2 is None else fix.hit_cov_en_m2.tolist()
-        for p, sigma, cov in zip(
-            fix.hits_enu.tolist(), fix.hit_sigma_m.tolist(), covs, strict=True
-        ):
-            hits.append(hit_body(p, sigma, cov))
-        dicts += hits
+    out: list[dict[str, Any] | None] = [None] * len(pending)
+    if not fixes:
+        return out, []
+    points = np.concatenate([f.hits_enu for f in fixes])
+    rows = points.tolist()
+    sigmas = np.concatenate([f.hit_sigma_m for f in fixes]).tolist()
+    with_cov = all(f.hit_cov_en_m2 is not None for f in fixes)
+    covs = np.concatenate([f.hit_cov_en_m2 for f in fixes]).tolist() if with_cov else None
+    origins = np.array([f.origin_enu for f in fixes]).tolist()
+    directions = np.array([f.direction_enu for f in fixes]).tolist()
+    hit_dicts: list[dict[str, Any]] = []
+    road_points, road_dicts = [], []
+    lo = 0
+    for f, origin, direction in zip(fixes, origins, directions, strict=True):
+        hi = lo + len(f.hit_sigma_m)
+        if covs is not None:
+            hits = [
+                {
+                    "e_m": p[0],
+                    "n_m": p[1],
+                    "u_m": p[2],
+                    "lat_deg": None,
+                    "lon_deg": None,
+                    "h_m": None,
+                    "sigma_m": sigma,
+                    "cov_en_m2": cov,
+                }
+                for p, sigma, cov in zip(rows[lo:hi], sigmas[lo:hi], covs[lo:hi], strict=True)
+            ]
+        else:
+            cov_f = None if f.hit_cov_en_m2 is None else f.hit_cov_en_m2.tolist()
+            hits = [
+                hit_body(p, sigma, None if cov_f is None else cov_f[j])
+                for j, (p, sigma) in enumerate(zip(rows[lo:hi], sigmas[lo:hi], strict=True))
+            ]
+        hit_dicts += hits
         road = None
-        if fix.road_hit_enu is not None:
-            sigma = float(np.min(fix.hit_sigma_m)) if len(fix.hit_sigma_m) else 1.0
-            road = hit_body(fix.road_hit_enu.tolist(), sigma)
-            dicts.append(road)
+        if f.road_hit_enu is not None:
+            road = hit_body(f.road_hit_enu.tolist(), min(sigmas[lo:hi], default=1.0))
+            road_points.append(f.road_hit_enu)
+            road_dicts.append(road)
+        lo = hi
+        det_id, d = pending[f.detection_index]
         u0, _, u1, v1 = d.bbox
-        out.append(
-            {
-                "detection_id": det_id,
-                "t_s": d.t_s,
-                "sensor": d.sensor,
-                "cls": d.cls,
-                "score": d.score,
-                "bbox": list(d.bbox),
-                "foot_pixel": [0.5 * (u0 + u1), v1],
-                "origin_enu": fix.origin_enu.tolist(),
-                "direction_enu": fix.direction_enu.tolist(),
-                "hits": hits,
-                "road_hit": road,
-                "tracked": True,
-            }
-        )
-    return out, [(np.vstack(chunks), dicts)] if chunks else []
+        out[f.detection_index] = {
+            "detection_id": det_id,
+            "t_s": d.t_s,
+            "sensor": d.sensor,
+            "cls": d.cls,
+            "score": d.score,
+            "bbox": list(d.bbox),
+            "foot_pixel": [0.5 * (u0 + u1), v1],
+            "origin_enu": origin,
+            "direction_enu": direction,
+            "hits": hits,
+            "road_hit": road,
+            "tracked": True,
+        }
+    work = [(points, hit_dicts)]
+    if road_points:
+        work.append((np.array(road_points), road_dicts))
+    return out, work
+
+
+def tracker_fixes(
+    bodies: Sequence[dict[str, Any] | None], fixes: Sequence[Fix]
+) -> list[tuple[int, Fix]]:
+    """``(detection id, the tracker's fix)`` of each body of :func:`fix_bodies`.
+
+    The fix :func:`fixes_from_bodies` makes of the stored body, bit for bit (the start-up
+    replay's fix), made from the builder's fix itself (:meth:`Fix.reindexed`) rather than
+    from the body's lists: the body holds the builder's own floats.
+    """
+    out = []
+    for f in fixes:
+        body = bodies[f.detection_index]
+        assert body is not None  # fix_bodies made one for every fix
+        made = f.reindexed(body["detection_id"]) if f.n_hits else fix_from_body(body)
+        out.append((body["detection_id"], made))
+    return out
 
 
 def fixes_from_bodies(bodies: Sequence[dict[str, Any]]) -> list[Fix]:

@@ -38,7 +38,7 @@ from ..store.backend import StoreBackend
 from ..store.derived import FixRow
 from ..store.integrity import StoreUnavailableError
 from .events import event_message, ingest_message
-from .fix_codec import fix_bodies, fixes_from_bodies
+from .fix_codec import fix_bodies, tracker_fixes
 from .group_commit import Ack, GroupCommit, Request, commit_group
 from .held_writes import HeldWrites
 from .pose_book import WINDOW_S, PoseBook, geolocate_posed, sample_from_body
@@ -568,14 +568,12 @@ class Pipeline:
     ) -> tuple[list[dict[str, Any] | None], list[Geodetic]]:
         """The stored bodies of ``pending``'s fixes (:func:`.fix_codec.fix_bodies`).
 
-        The tracker's fix of each body is made from the body (as the start-up replay
-        makes it) and waits in the reorder buffer's :attr:`~.ReorderBuffer.fixes`.
+        The tracker's fix of each body, the one the start-up replay makes of it
+        (:func:`.fix_codec.tracker_fixes`), waits in the reorder buffer's
+        :attr:`~.ReorderBuffer.fixes`.
         """
         bodies, unfilled = fix_bodies(pending, fixes)
-        made = [b for b in bodies if b is not None]
-        self.buffer.fixes.update(
-            zip((b["detection_id"] for b in made), fixes_from_bodies(made), strict=True)
-        )
+        self.buffer.fixes.update(tracker_fixes(bodies, fixes))
         return bodies, unfilled
 
     def _process(
