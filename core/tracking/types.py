@@ -367,7 +367,7 @@ class Fix:
         return out
 
     def reindexed(self, detection_index: int) -> Fix:
-        """This fix under another detection index, as :meth:`from_arrays` makes it again.
+        """The same fix under another detection index, as :meth:`from_arrays` remakes it.
 
         The fix :meth:`from_arrays` gives of this fix's own values (its direction
         normalised once more, its covariances symmetrised once more: a no-op), bit for
@@ -401,8 +401,11 @@ class Fix:
 
 
 def _unit(d: np.ndarray) -> np.ndarray:
-    """``d`` (shape (3,), contiguous float64) over its length, read-only: the stacked fix
-    constructor's normalisation (one arithmetic, so a re-made fix keeps every bit)."""
+    """``d`` (shape (3,), contiguous float64) over its length, read-only.
+
+    The stacked fix constructor's normalisation (one arithmetic, so a re-made fix keeps
+    every bit).
+    """
     # np.linalg.norm of a 1-D float array is sqrt(x.dot(x)): the same bits, one call
     norm = math.sqrt(d.dot(d))
     if norm == 0.0:
