@@ -152,7 +152,8 @@ class Pipeline:
         self._last_t: dict[str, float] = {}
         self._n_det: dict[str, int] = {}
         self._pose_interval_s = float(pose_interval_s)
-        self.writes = HeldWrites(store, self._publish_now, self.commits.lock)
+        #: Derived writes in order; those a full store refused wait for space.
+        self.writes = self._held_writes()
         self._fresh_tracking()
         self._flush_timer: threading.Timer | None = None
         self._inline: dict[str, Any] | None = None
@@ -232,6 +233,8 @@ class Pipeline:
         """
         with self._lock:
             self.tracking = False
+            self.writes.close()  # what it held is rebuilt from the durable state
+            self.writes = self._held_writes()
             self._fresh_tracking()
             self.fence = fence
             self.tail_after = 0
@@ -239,11 +242,12 @@ class Pipeline:
             self.tracking = True
             return counts
 
+    def _held_writes(self) -> HeldWrites:
+        """A new, empty queue of derived writes on :attr:`store`."""
+        return HeldWrites(self.store, self._publish_now, self.commits.lock)
+
     def _fresh_tracking(self) -> None:
         """The tracker, its reorder buffer, track bodies, pose book and events, all new."""
-        self.writes.close()  # what it held is rebuilt from the durable state
-        #: Derived writes in order; those a full store refused wait for space.
-        self.writes = HeldWrites(self.store, self._publish_now, self.commits.lock)
         self.buffer = ReorderBuffer(self.reorder_lag_s)
         self.feed = TrackerFeed(build_tracker(self.method, roads=self.site.roads), self.buffer)
         self.bodies = TrackBodies(self.site.frame)
