@@ -74,25 +74,15 @@ def fix_bodies(
     for f, origin, direction in zip(fixes, origins, directions, strict=True):
         hi = lo + len(f.hit_sigma_m)
         if covs is not None:
-            hits = [
-                {
-                    "e_m": p[0],
-                    "n_m": p[1],
-                    "u_m": p[2],
-                    "lat_deg": None,
-                    "lon_deg": None,
-                    "h_m": None,
-                    "sigma_m": sigma,
-                    "cov_en_m2": cov,
-                }
-                for p, sigma, cov in zip(rows[lo:hi], sigmas[lo:hi], covs[lo:hi], strict=True)
-            ]
+            cov_f: list[Any] = covs[lo:hi]
+        elif f.hit_cov_en_m2 is not None:
+            cov_f = f.hit_cov_en_m2.tolist()
         else:
-            cov_f = None if f.hit_cov_en_m2 is None else f.hit_cov_en_m2.tolist()
-            hits = [
-                hit_body(p, sigma, None if cov_f is None else cov_f[j])
-                for j, (p, sigma) in enumerate(zip(rows[lo:hi], sigmas[lo:hi], strict=True))
-            ]
+            cov_f = [None] * (hi - lo)
+        hits = [
+            hit_body(p, sigma, cov)
+            for p, sigma, cov in zip(rows[lo:hi], sigmas[lo:hi], cov_f, strict=True)
+        ]
         hit_dicts += hits
         road = None
         if f.road_hit_enu is not None:

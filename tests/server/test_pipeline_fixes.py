@@ -24,8 +24,18 @@ def test_live_fixes_equal_the_stored_bodies_fixes(sample_site_dir, tmp_path):
     from demtrack.core.geolocation.fix_builder import build_fixes
 
     fixes, _ = build_fixes(site, validated)
-    bodies, _ = p._fix_bodies(pending, fixes)  # geodetic fields unfilled: not read back
+    bodies, unfilled = p._fix_bodies(pending, fixes)  # geodetic fields unfilled: not read back
     live = p._queued_fixes
+    # the geodetic work holds every hit and road point of the bodies once, at its point
+    want = [h for b in bodies if b for h in b["hits"] + ([b["road_hit"]] if b["road_hit"] else [])]
+    assert any(b["road_hit"] for b in bodies if b)
+    work = [
+        (row, d)
+        for points, dicts in unfilled
+        for row, d in zip(points.tolist(), dicts, strict=True)
+    ]
+    assert sorted(map(id, want)) == sorted(id(d) for _, d in work)
+    assert all(row == [d["e_m"], d["n_m"], d["u_m"]] for row, d in work)
     n = 0
     for body in bodies:
         if body is None:
