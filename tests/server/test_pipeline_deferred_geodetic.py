@@ -29,7 +29,9 @@ def test_deferred_geodetic_fields_equal_those_of_their_own_call(sample_site_dir,
         fixes, _ = build_fixes(site, [d for _, d in group])
         deferred, unfilled = p._fix_bodies(group, fixes)
         # the oracle: the bodies with the fields of a geodetic call of their own
-        ((pts, dicts),) = unfilled
+        # (hits and road points: one or two (points, dicts) pairs, converted together)
+        pts = np.concatenate([a for a, _ in unfilled])
+        dicts = [d for _, ds in unfilled for d in ds]
         lat, lon, h = (np.atleast_1d(a).tolist() for a in site.frame.to_geodetic(*pts.T))
         for d, values in zip(dicts, zip(lat, lon, h, strict=True), strict=True):
             assert (d["lat_deg"], d["lon_deg"], d["h_m"]) == (None, None, None)
