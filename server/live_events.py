@@ -9,7 +9,9 @@ is bounded by the window, not by how long the server has run.
 
 Episodes are deduplicated: a loitering, rendezvous or convoy found again (same kind and
 targets, overlapping or touching the known episode in time) extends the known one instead
-of starting another; it is closed when an evaluation no longer finds it or its end lags
+of starting another, and so does a convoy whose members are a subset or superset of an open
+convoy's (a vehicle joined or left the column: the episode's ``track_ids`` change, its key
+stays); it is closed when an evaluation no longer finds it or its end lags
 the present by more than ``2 * every_s + 2 * sample_s + 1`` s (the targets moved on), and
 is not announced again while the window still holds it. Zone crossings
 are instantaneous: one per track, zone and direction within ``2 * every_s``.
@@ -123,9 +125,13 @@ def _thin(track: Track, t_from: float, sample_s: float) -> Window | None:
 
 
 def _identity(e: ActivityEvent) -> str:
-    ids = ",".join(str(i) for i in sorted(e.track_ids))
-    zone = e.details.get("zone")
-    return f"{e.kind}:{ids}" + (f":{zone}" if zone is not None else "")
+    return _identity_of(e.kind, e.track_ids, e.details.get("zone"))
+
+
+def _identity_of(kind: str, track_ids: Sequence[int], zone: Any = None) -> str:
+    """An episode's identity: its kind, its targets (in id order) and its zone, if any."""
+    ids = ",".join(str(i) for i in sorted(track_ids))
+    return f"{kind}:{ids}" + (f":{zone}" if zone is not None else "")
 
 
 class LiveEvents:
@@ -147,6 +153,8 @@ class LiveEvents:
         self._open: dict[str, dict[str, Any]] = {}
         self._crossings: dict[str, float] = {}
         self._closed: dict[str, float] = {}
+        #: The members each open episode was last streamed with (its start or an update).
+        self._announced: dict[str, list[int]] = {}
         self._handoff: dict[int, tuple[str | None, str | None]] = {}
         # a track's new (current, next) pair and how many evaluations in a row gave it
         self._pending: dict[int, tuple[tuple[str | None, str | None], int]] = {}
@@ -156,6 +164,7 @@ class LiveEvents:
                 self._handoff[body["track_ids"][0]] = (d.get("current"), d.get("next_sensor"))
             elif body.get("open"):
                 self._open[body["identity"]] = body
+                self._announced[body["identity"]] = body["track_ids"]
 
     # ------------------------------------------------------------------ helpers
     def _body(self, e: ActivityEvent, windows: Mapping[int, Window], identity: str) -> dict:
@@ -195,8 +204,14 @@ class LiveEvents:
     # --------------------------------------------------------------- evaluation
     def evaluate(
         self, tracks: Sequence[Track], live_ids: set[int], t_now: float
-    ) -> list[dict[str, Any]]:
-        """Run the detectors at ``t_now``; return new, changed and closed event bodies."""
+    ) -> list[tuple[dict[str, Any], bool]]:
+        """Run the detectors at ``t_now``: new, changed and closed event bodies.
+
+        Each body comes with whether it is news for the stream: a start, an end, or an
+        update whose members changed (a convoy a vehicle joined or left). An update that
+        only grows the episode's span is stored, not streamed: a console learns the
+        final span from the end.
+        """
         prm = self.params
         self.last_eval_t = t_now
         t_from = t_now - prm.window_s
@@ -221,6 +236,7 @@ class LiveEvents:
                     windows[w.id] = w
         ws = list(windows.values())
         out: list[dict[str, Any]] = []
+        news: set[int] = set()  # id() of the updates in ``out`` the stream must carry
         found = detect_loitering(ws, prm.loiter) + detect_rendezvous(ws, prm.rendezvous)
         found += detect_convoys([w for w in ws if w.cls == "vehicle"], prm.convoy)
         seen: set[str] = set()
@@ -229,17 +245,16 @@ class LiveEvents:
             closed = self._closed.get(ident)
             if closed is not None and e.t_start_s <= closed + touch:
                 continue  # the window still holds an episode already closed
-            old = self._open.get(ident)
-            if old is not None and e.t_start_s <= old["t_end_s"] + touch:
-                seen.add(ident)
-                t0, t1 = min(old["t_start_s"], e.t_start_s), max(old["t_end_s"], e.t_end_s)
-                if (t0, t1) != (old["t_start_s"], old["t_end_s"]):
-                    # a new dict: bodies already returned may still be on their way out
-                    details = _jsonable(e.details)
-                    new = dict(old, t_start_s=t0, t_end_s=t1, state="update", details=details)
-                    self._open[ident] = new
-                    out.append(new)
+            going_on = self._continued(e, ident, touch)
+            if going_on is not None:
+                seen.add(going_on)
+                grown = self._extend(going_on, e, windows)
+                if grown is not None:
+                    out.append(grown)
+                    if grown["track_ids"] != self._announced.get(going_on):
+                        news.add(id(grown))
                 continue
+            old = self._open.get(ident)
             if ident in seen:
                 continue
             if old is not None:  # a new episode of the same targets: close the old one
@@ -258,7 +273,66 @@ class LiveEvents:
             out += self._zone_events(ws, windows, t_now)
         if prm.handoff_horizon_s > 0:
             out += self._handoffs(tracks, live_ids, t_now)
-        return out
+        found_news = [(b, b["state"] != "update" or id(b) in news) for b in out]
+        for b, is_news in found_news:
+            if is_news and b.get("open"):
+                self._announced[b["identity"]] = b["track_ids"]
+            elif b["state"] == "end":
+                self._announced.pop(b["identity"], None)
+        return found_news
+
+    def _continued(self, e: ActivityEvent, ident: str, touch: float) -> str | None:
+        """The identity of the open episode ``e`` continues, if any.
+
+        The episode of the same kind and targets that ``e`` overlaps or touches in time;
+        for a convoy also one whose members are a subset or superset of ``e``'s (a
+        vehicle joined or left the column): one episode whose members change, not a new
+        event per membership. Among several, the one sharing most members, then the
+        oldest.
+        """
+        old = self._open.get(ident)
+        if old is not None and e.t_start_s <= old["t_end_s"] + touch:
+            return ident
+        if e.kind != EventKind.CONVOY:
+            return None
+        members = set(e.track_ids)
+        best: tuple[int, float, str] | None = None
+        for other, body in self._open.items():
+            if body["kind"] != EventKind.CONVOY or e.t_start_s > body["t_end_s"] + touch:
+                continue
+            theirs = set(body["track_ids"])
+            if not (members <= theirs or theirs <= members):
+                continue
+            rank = (-len(members & theirs), body["t_start_s"], other)
+            if best is None or rank < best:
+                best = rank
+        return None if best is None else best[2]
+
+    def _extend(
+        self, ident: str, e: ActivityEvent, windows: Mapping[int, Window]
+    ) -> dict[str, Any] | None:
+        """The open episode ``ident`` grown by ``e`` (span, details, members, sensors).
+
+        None when ``e`` changes neither its span nor its members.
+        """
+        old = self._open[ident]
+        t0, t1 = min(old["t_start_s"], e.t_start_s), max(old["t_end_s"], e.t_end_s)
+        members = [int(i) for i in e.track_ids]
+        if (t0, t1) == (old["t_start_s"], old["t_end_s"]) and members == old["track_ids"]:
+            return None
+        sensors = sorted({*old["sensors"], *self._body(e, windows, ident)["sensors"]})
+        # a new dict: bodies already returned may still be on their way out
+        new = dict(
+            old,
+            t_start_s=t0,
+            t_end_s=t1,
+            state="update",
+            details=_jsonable(e.details),
+            track_ids=members,
+            sensors=sensors,
+        )
+        self._open[ident] = new
+        return new
 
     @staticmethod
     def _in_play(track: Track, live_ids: set[int], recent_s: float) -> bool:
@@ -268,6 +342,9 @@ class LiveEvents:
     def _close(self, ident: str) -> dict[str, Any]:
         body = dict(self._open.pop(ident), state="end", open=False)
         self._closed[ident] = body["t_end_s"]
+        # an episode whose members changed is also over for its last members' identity
+        zone = body["details"].get("zone") if isinstance(body["details"], dict) else None
+        self._closed[_identity_of(body["kind"], body["track_ids"], zone)] = body["t_end_s"]
         return body
 
     def _zone_events(
@@ -361,8 +438,8 @@ class LiveEvents:
                 details,
             )
             # One prediction per track, replaced: the same key every time (the stored row
-            # is updated in place). Each new prediction is a "start" (the pipeline streams
-            # starts and ends, not updates), so every console gets it.
+            # is updated in place, a console replaces it by key). Each new prediction is a
+            # "start": a new statement, not the growth of an episode.
             ident = f"{EventKind.HANDOFF}:{tr.id}"
             body = self._body(e, {}, ident)
             body["key"] = ident

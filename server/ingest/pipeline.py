@@ -648,9 +648,9 @@ class Pipeline:
                 found = self.live_events.evaluate(
                     self._window_tracks(window), self.bodies.live_ids, released_t
                 )
-                for body in found:
+                for body, news in found:  # stored; streamed when news (LiveEvents.evaluate)
                     activity.append(body)
-                    if body["state"] != "update":
+                    if news:
                         events.append(("event", event_message(body)))
         events += sensor_status_messages(
             sorted({*batch_sensors, *(d.sensor for d in dets)}), self._last_t, self._n_det
