@@ -119,6 +119,22 @@ def test_each_activity_kind_is_drawn_as_itself(activity_server, page):
         "window.demtrack.map.events.getSource().getFeatures().map(f => f.get('kind'))"
     )
     assert not {"loitering", "rendezvous", "convoy"} & set(stars)
+    # the labels are on a decluttering layer of their own (crowded episodes do not stack
+    # their labels into a block), one per drawn episode; a long convoy's label is short
+    labels = page.evaluate(
+        "(() => { const l = window.demtrack.activity.labels; return {declutter:"
+        " l.getDeclutter(), keys: l.getSource().getFeatures().map(f => f.get('event').key),"
+        " texts: l.getSource().getFeatures().map(f => f.get('label'))}; })()"
+    )
+    assert labels["declutter"] == "activity"
+    assert sorted(labels["keys"]) == sorted(e["key"] for e in evs)
+    convoy = next(e for e in evs if e["kind"] == "convoy")
+    assert f"convoy #{'→#'.join(map(str, convoy['track_ids']))} · " in " | ".join(labels["texts"])
+    long_label = page.evaluate(
+        "import('/console/activity_layer.mjs').then(m => m.convoyLabel("
+        "{track_ids: [12, 3, 40, 7, 9], t_s: 100, t_end_s: 143.4}))"
+    )
+    assert long_label == "convoy #12 + 4 vehicles · 43 s"
 
     # the kind chips: only rendezvous rows; a click on one selects both its tracks
     rdv = next(e for e in evs if e["kind"] == "rendezvous")

@@ -57,13 +57,25 @@ export class ActivityLayer {
     this.layer.set("name", "activity");
     this.layer.set("title", "Activity (loiter, meet, convoy)");
     siteMap.map.addLayer(this.layer);
+    // The episodes' labels on a layer of their own that declutters: where episodes crowd
+    // (a busy road's convoys), a label that would overlap one already drawn is left out
+    // rather than stacked into an unreadable block; the shapes all stay.
+    this.labels = new ol.layer.Vector({
+      source: new ol.source.Vector(),
+      style: (f, res) => this.style(f, res),
+      declutter: "activity", // decluttered among themselves only
+      zIndex: 8,
+    });
+    this.labels.set("name", "activity-labels");
+    this.layer.on("change:visible", () => this.labels.setVisible(this.layer.getVisible()));
+    siteMap.map.addLayer(this.labels);
     this.sig = null;
     this.lastDraw = 0;
     this.items = []; // what is drawn: {kind, key, track_ids, ...} (the tests read it)
     siteMap.map.on("singleclick", (e) => {
       if (siteMap.trackAt(e.pixel) !== null) return; // a track's own click wins
       const f = siteMap.map.forEachFeatureAtPixel(e.pixel, (x) => x, {
-        layerFilter: (l) => l === this.layer, hitTolerance: 4,
+        layerFilter: (l) => l === this.layer || l === this.labels, hitTolerance: 4,
       });
       const ev = f && f.get("event");
       if (ev) selectEvent(ev);
@@ -91,7 +103,9 @@ export class ActivityLayer {
   draw(events, t) {
     const src = this.layer.getSource();
     src.clear(true);
+    this.labels.getSource().clear(true);
     const feats = [];
+    const labels = [];
     const items = [];
     const selKey = ui.selectedEvent?.key ?? null;
     for (const ev of events) {
@@ -100,7 +114,7 @@ export class ActivityLayer {
       const add = (geom, role, extra = {}) => {
         const f = new ol.Feature(geom);
         f.setProperties({ kind: ev.kind, role, sel, event: ev, ...extra });
-        feats.push(f);
+        (role === "label" ? labels : feats).push(f);
         return f;
       };
       const d = ev.details || {};
@@ -131,9 +145,7 @@ export class ActivityLayer {
         if (!pts.every(Boolean)) continue;
         add(new ol.geom.LineString(pts), "chain");
         pts.forEach((p, k) => add(new ol.geom.Point(p), "member", { label: String(k + 1) }));
-        add(new ol.geom.Point(pts[0]), "label", {
-          label: `convoy #${ev.track_ids.join("→#")} · ${Math.round(dur(ev))} s`, offset: -22,
-        });
+        add(new ol.geom.Point(pts[0]), "label", { label: convoyLabel(ev), offset: -22 });
         items.push({ kind: ev.kind, key: ev.key, track_ids: ev.track_ids, members: pts, duration_s: dur(ev) });
       }
       if (sel) { // the selected episode's tracks over its span, in the selection colour
@@ -145,6 +157,9 @@ export class ActivityLayer {
       }
     }
     src.addFeatures(feats);
+    // the selected episode's label first: decluttering keeps what is drawn first
+    labels.sort((a, b) => Number(b.get("sel")) - Number(a.get("sel")));
+    this.labels.getSource().addFeatures(labels);
     this.items = items;
   }
 
@@ -177,6 +192,14 @@ export class ActivityLayer {
     if (role === "label") return new ol.style.Style({ text: text(f.get("label"), f.get("offset") ?? -12) });
     return null;
   }
+}
+
+/** A convoy's map label: its members in order while they fit (leader first), else the
+ * leader and how many follow; the detail panel lists them all. */
+export function convoyLabel(ev) {
+  const ids = ev.track_ids;
+  const who = ids.length <= 3 ? `#${ids.join("→#")}` : `#${ids[0]} + ${ids.length - 1} vehicles`;
+  return `convoy ${who} · ${Math.round(dur(ev))} s`;
 }
 
 /** The one line main.mjs calls: the activity layer on `siteMap`, also as
