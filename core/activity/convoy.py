@@ -32,6 +32,7 @@ from .detectors import (
 
 __all__ = [
     "ConvoyParams",
+    "convoys_of_pairs",
     "detect_convoys",
 ]
 
@@ -284,7 +285,6 @@ def detect_convoys(
     :func:`~demtrack.core.activity.reference.detect_convoys_reference`.
     """
     params = params or ConvoyParams()
-    ids = _ids(trajectories)
     n, first_t, last_t, lo, hi = _extents(trajectories)
     valid = n >= 2
     drives = {k: _Drive.of(tr) for k, tr in enumerate(trajectories) if valid[k]}
@@ -320,7 +320,20 @@ def detect_convoys(
         found = _follow_stretches(drives[a], fleet, params, ok & np.isin(fleet.owner, worth))
         for b, q0, q1, lag, dist in found:
             pairs.append((a, b, q0, q1, lag, dist))
-    # Join pairs that share a vehicle and overlap in time (a leader-follower chain).
+    return convoys_of_pairs(trajectories, pairs)
+
+
+def convoys_of_pairs(
+    trajectories: Sequence[Trajectory],
+    pairs: Sequence[tuple[int, int, float, float, float, float]],
+) -> list[ActivityEvent]:
+    """Join ``(leader, follower, t_start, t_end, lag_s, distance_m)`` pairs into convoys.
+
+    Pairs that share a vehicle and overlap in time join into one convoy (a chain of
+    leaders and followers), taken in order of start time. A convoy's members are in column
+    order, head first (:func:`_column_order`).
+    """
+    ids = _ids(trajectories)
     groups: list[dict[str, Any]] = []
     for a, b, t0, t1, lag, dist in sorted(pairs, key=lambda q: q[2]):
         for g in groups:
@@ -329,7 +342,7 @@ def detect_convoys(
                 g["t0"], g["t1"] = min(g["t0"], t0), max(g["t1"], t1)
                 g["lags"].append(lag)
                 g["dist"] = max(g["dist"], dist)
-                g["order"].append((a, b))
+                g["order"].append((a, b, lag))
                 break
         else:
             groups.append(
@@ -339,13 +352,12 @@ def detect_convoys(
                     "t1": t1,
                     "lags": [lag],
                     "dist": dist,
-                    "order": [(a, b)],
+                    "order": [(a, b, lag)],
                 }
             )
     out = []
     for g in groups:
-        followers = {b for _, b in g["order"]}
-        order = sorted(g["members"], key=lambda k: (k in followers, k))
+        order = _column_order(g["members"], g["order"])
         mid_t = (g["t0"] + g["t1"]) / 2
         centre = np.mean([_resample(trajectories[k], np.array([mid_t]))[0] for k in order], axis=0)
         out.append(
@@ -359,3 +371,23 @@ def detect_convoys(
             )
         )
     return out
+
+
+def _column_order(members: set[int], edges: Sequence[tuple[int, int, float]]) -> list[int]:
+    """A convoy's members in column order: by how far (s) each drives behind the head.
+
+    ``edges``: ``(leader, follower, lag_s)``, each a measured difference of two members'
+    times at the same place on the road. Every member's time behind the first is their
+    least-squares fit (the group is connected: its pairs were joined by shared members),
+    so a member that leads some and follows none of the others still takes its place in
+    the column rather than going first. Ties (to a microsecond) go by index.
+    """
+    order = sorted(members)
+    col = {k: i for i, k in enumerate(order)}
+    a = np.zeros((len(edges) + 1, len(order)))
+    rhs = np.zeros(len(edges) + 1)
+    for r, (lead, follow, lag) in enumerate(edges):
+        a[r, col[follow]], a[r, col[lead]], rhs[r] = 1.0, -1.0, lag
+    a[-1, 0] = 1.0  # the first member's time is 0: the fit is unique
+    behind = np.linalg.lstsq(a, rhs, rcond=None)[0]
+    return sorted(order, key=lambda k: (round(float(behind[col[k]]), 6), k))

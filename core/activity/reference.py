@@ -11,12 +11,11 @@ as the numba kernels are checked against their plain-numpy twins.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
 
 import numpy as np
 import shapely
 
-from .convoy import ConvoyParams, _step_s
+from .convoy import ConvoyParams, _step_s, convoys_of_pairs
 from .detectors import ActivityEvent, Trajectory, _ids, _resample, _runs, _speed
 from .loitering import LoiterParams
 from .rendezvous import RendezvousParams
@@ -148,48 +147,10 @@ def detect_convoys_reference(
 ) -> list[ActivityEvent]:
     """All-pairs :func:`~demtrack.core.activity.detectors.detect_convoys`."""
     params = params or ConvoyParams()
-    ids = _ids(trajectories)
     pairs = []
     for a, lead in enumerate(trajectories):
         for b, follow in enumerate(trajectories):
             if a != b:
                 for t0, t1, lag, dist in _follow_stretches_reference(lead, follow, params):
                     pairs.append((a, b, t0, t1, lag, dist))
-    groups: list[dict[str, Any]] = []
-    for a, b, t0, t1, lag, dist in sorted(pairs, key=lambda q: q[2]):
-        for g in groups:
-            if ({a, b} & g["members"]) and t0 <= g["t1"] and t1 >= g["t0"]:
-                g["members"] |= {a, b}
-                g["t0"], g["t1"] = min(g["t0"], t0), max(g["t1"], t1)
-                g["lags"].append(lag)
-                g["dist"] = max(g["dist"], dist)
-                g["order"].append((a, b))
-                break
-        else:
-            groups.append(
-                {
-                    "members": {a, b},
-                    "t0": t0,
-                    "t1": t1,
-                    "lags": [lag],
-                    "dist": dist,
-                    "order": [(a, b)],
-                }
-            )
-    out = []
-    for g in groups:
-        followers = {b for _, b in g["order"]}
-        order = sorted(g["members"], key=lambda k: (k in followers, k))
-        mid_t = (g["t0"] + g["t1"]) / 2
-        centre = np.mean([_resample(trajectories[k], np.array([mid_t]))[0] for k in order], axis=0)
-        out.append(
-            ActivityEvent(
-                "convoy",
-                g["t0"],
-                g["t1"],
-                tuple(ids[k] for k in order),
-                centre,
-                {"lags_s": [float(x) for x in g["lags"]], "distance_m": g["dist"]},
-            )
-        )
-    return out
+    return convoys_of_pairs(trajectories, pairs)

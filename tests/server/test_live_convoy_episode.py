@@ -5,11 +5,13 @@ nine cars on one road; the live detector first sees its head and then more cars 
 qualify (100 m behind a leader). The server used to announce a new convoy for each new
 membership and end the previous one (six convoys for this column, the map covered in their
 labels); now it is one episode, keyed once, whose ``track_ids`` grow, streamed as a start
-and its updates. The oracle for its members is the offline detector on the final tracks.
+and its updates. The oracle for its members is the offline detector on the final tracks;
+for their order (the column's, head first), the order in which they pass one place.
 """
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from server_helpers import stored_messages, time_batches
 
@@ -47,6 +49,18 @@ def test_a_growing_column_is_one_convoy_episode(sample_site_dir, tmp_path):
     in_convoys = {i for e in offline for i in e.track_ids}
     assert len(in_convoys) >= 6
     assert set(episode["track_ids"]) == in_convoys
+
+    # in column order (head first): the order in which the members pass the place where
+    # the head was when the convoy began
+    tracks = {t.id: t for t in p.tracker.tracks()}
+    head = tracks[episode["track_ids"][0]]
+    place = head.p_enu[np.searchsorted(head.t_s, episode["t_start_s"]), :2]
+    passed = []
+    for i in episode["track_ids"]:
+        miss = np.hypot(*(tracks[i].p_enu[:, :2] - place).T)
+        assert miss.min() < 1.0  # every member drives through it
+        passed.append(tracks[i].t_s[int(np.argmin(miss))])
+    assert passed == sorted(passed) and len(set(passed)) == len(passed)
 
     messages = [
         m["event"]
