@@ -135,6 +135,31 @@ def test_each_activity_kind_is_drawn_as_itself(activity_server, page):
         "{track_ids: [12, 3, 40, 7, 9], t_s: 100, t_end_s: 143.4}))"
     )
     assert long_label == "convoy #12 + 4 vehicles · 43 s"
+    # in the middle of the convoy (the cars spread along the road) the chain follows the
+    # road the head drove, through every member, ending at the head
+    t_mid = (convoy["t_start_s"] + convoy["t_end_s"]) / 2
+    page.evaluate(f"window.demtrack.timeline.seek({t_mid})")
+
+    def chain_now() -> tuple | None:
+        got = page.evaluate(
+            "(() => { const a = window.demtrack.activity;"
+            f" const key = {convoy['key']!r};"
+            " const it = a.items.find(i => i.key === key);"
+            " const f = a.layer.getSource().getFeatures()"
+            "   .find(x => x.get('role') === 'chain' && x.get('event').key === key);"
+            " return it && f ? [it.members, f.getGeometry().getCoordinates()] : null; })()"
+        )
+        # redrawn at the new time: the cars spread along the road, not piled up at the exit
+        if got is None or np.ptp(np.array(got[0]), axis=0).sum() < 20.0:
+            return None
+        return got
+
+    members, chain = wait_until(chain_now, timeout_s=30, page=page)
+    members, line = np.array(members), np.array(chain)
+    assert len(line) > len(members)  # the road's points, not a straight link per member
+    assert np.allclose(line[-1], members[0])
+    for m in members:
+        assert np.min(np.hypot(*(line - m).T)) < 10.0
 
     # the kind chips: only rendezvous rows; a click on one selects both its tracks
     rdv = next(e for e in evs if e["kind"] == "rendezvous")

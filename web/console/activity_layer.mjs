@@ -5,7 +5,8 @@
 //   with the track, the duration and the radius;
 // - rendezvous: a link between the meeting tracks (their positions in the middle of the
 //   meeting), labelled with the tracks, the duration and their mean distance;
-// - convoy: the members joined in order, leader first, each numbered (1 = leader).
+// - convoy: the members in column order, head first, each numbered (1 = head), joined
+//   along the road the head drove (alongHead).
 //
 // The window is the trajectories' window (synopsis.mjs `synopsisWindow`: 1 min to all)
 // ending at the shown time, so an episode stays on the map as long as the operator's
@@ -35,6 +36,31 @@ function where(tr, t) {
   const q = t < pts[0].t_s ? pts[0] : pts[pts.length - 1];
   return [q.e_m, q.n_m];
 }
+
+/** A convoy's chain at time tc: the road its head drove from where the last member is
+ * to where the head is, through every member (the followers drive the head's path). A
+ * follower can be 30 s behind, 200 m or more along a winding road: straight lines between
+ * the members would cut across the bends. Straight lines when the head's path does not
+ * pass near every member (its points trimmed, say). */
+export function alongHead(head, pts, tc) {
+  const path = head ? head.points.filter((p) => p.t_s <= tc && p.t_s >= tc - CHAIN_SPAN_S) : [];
+  if (path.length < 2) return pts;
+  let from = path.length - 1;
+  for (const [e, n] of pts.slice(1)) {
+    let best = -1;
+    let bestD = CHAIN_NEAR_M ** 2;
+    path.forEach((p, k) => {
+      const d = (p.e_m - e) ** 2 + (p.n_m - n) ** 2;
+      if (d <= bestD) { best = k; bestD = d; }
+    });
+    if (best < 0) return pts;
+    from = Math.min(from, best);
+  }
+  return [...path.slice(from).map((p) => [p.e_m, p.n_m]), pts[0]];
+}
+
+const CHAIN_SPAN_S = 120; // how far back the head's path is searched for its followers (s)
+const CHAIN_NEAR_M = 10; // a follower on the head's path is this close to one of its points
 
 function dur(ev) {
   return Math.max(0, (ev.t_end_s ?? ev.t_s) - ev.t_s);
@@ -143,7 +169,7 @@ export class ActivityLayer {
         const tc = Math.min(t, ev.t_end_s ?? ev.t_s);
         const pts = tracks.map((tr) => where(tr, tc));
         if (!pts.every(Boolean)) continue;
-        add(new ol.geom.LineString(pts), "chain");
+        add(new ol.geom.LineString(alongHead(tracks[0], pts, tc)), "chain");
         pts.forEach((p, k) => add(new ol.geom.Point(p), "member", { label: String(k + 1) }));
         add(new ol.geom.Point(pts[0]), "label", { label: convoyLabel(ev), offset: -22 });
         items.push({ kind: ev.kind, key: ev.key, track_ids: ev.track_ids, members: pts, duration_s: dur(ev) });
