@@ -94,9 +94,11 @@ def test_each_activity_kind_is_drawn_as_itself(activity_server, page):
             tm = (e["t_start_s"] + e["t_end_s"]) / 2
             for end, tid in zip(i["ends"], e["track_ids"], strict=True):
                 assert np.hypot(*(np.array(end) - _at(tracks[tid], tm))) < 0.5
-        else:  # convoy: the members in the API's order (leader first) where they were
+        else:  # convoy: the members in the API's order (head first) where they were
             tc = min(t_shown, e["t_end_s"])
-            for p, tid in zip(i["members"], e["track_ids"], strict=True):
+            on_road = [k for k in e["track_ids"] if tracks[k]["points"][-1]["t_s"] >= tc]
+            assert i["member_ids"] == (on_road or e["track_ids"])
+            for p, tid in zip(i["members"], i["member_ids"], strict=True):
                 assert np.hypot(*(np.array(p) - _at(tracks[tid], tc))) < 0.5
     # the chosen window decides what is drawn: with 1 min only the episodes reaching into
     # the last minute before the shown time, with "all" every one again

@@ -166,13 +166,23 @@ export class ActivityLayer {
         });
         items.push({ kind: ev.kind, key: ev.key, track_ids: ev.track_ids, ends: pts, duration_s: dur(ev) });
       } else if (ev.kind === KIND.CONVOY) {
+        // The members still on the road at tc (a column's members change: one that left
+        // long ago is not drawn where it was last seen, across the map); when none is,
+        // every member where it was last seen.
         const tc = Math.min(t, ev.t_end_s ?? ev.t_s);
-        const pts = tracks.map((tr) => where(tr, tc));
-        if (!pts.every(Boolean)) continue;
-        add(new ol.geom.LineString(alongHead(tracks[0], pts, tc)), "chain");
-        pts.forEach((p, k) => add(new ol.geom.Point(p), "member", { label: String(k + 1) }));
+        const at = tracks.map((tr) => (tr ? positionAt(tr, tc) : null));
+        let ids = ev.track_ids.filter((_, k) => at[k]);
+        let pts = at.filter(Boolean).map((p) => [p.e_m, p.n_m]);
+        if (!pts.length) {
+          if (!tracks.every(Boolean)) continue;
+          ids = ev.track_ids;
+          pts = tracks.map((tr) => where(tr, tc));
+        }
+        const head = tracks[ev.track_ids.indexOf(ids[0])];
+        add(new ol.geom.LineString(alongHead(head, pts, tc)), "chain");
+        pts.forEach((p, k) => add(new ol.geom.Point(p), "member", { label: String(ev.track_ids.indexOf(ids[k]) + 1) }));
         add(new ol.geom.Point(pts[0]), "label", { label: convoyLabel(ev), offset: -22 });
-        items.push({ kind: ev.kind, key: ev.key, track_ids: ev.track_ids, members: pts, duration_s: dur(ev) });
+        items.push({ kind: ev.kind, key: ev.key, track_ids: ev.track_ids, members: pts, member_ids: ids, duration_s: dur(ev) });
       }
       if (sel) { // the selected episode's tracks over its span, in the selection colour
         for (const tr of tracks) {
