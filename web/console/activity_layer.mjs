@@ -6,7 +6,7 @@
 // - rendezvous: a link between the meeting tracks (their positions in the middle of the
 //   meeting), labelled with the tracks, the duration and their mean distance;
 // - convoy: the members in column order, head first, each numbered (1 = head), joined
-//   along the road the head drove (alongHead).
+//   along the road each drove behind the one ahead (chainAlongRoad).
 //
 // The window is the trajectories' window (synopsis.mjs `synopsisWindow`: 1 min to all)
 // ending at the shown time, so an episode stays on the map as long as the operator's
@@ -37,30 +37,35 @@ function where(tr, t) {
   return [q.e_m, q.n_m];
 }
 
-/** A convoy's chain at time tc: the road its head drove from where the last member is
- * to where the head is, through every member (the followers drive the head's path). A
- * follower can be 30 s behind, 200 m or more along a winding road: straight lines between
- * the members would cut across the bends. Straight lines when the head's path does not
- * pass near every member (its points trimmed, say). */
-export function alongHead(head, pts, tc) {
-  const path = head ? head.points.filter((p) => p.t_s <= tc && p.t_s >= tc - CHAIN_SPAN_S) : [];
-  if (path.length < 2) return pts;
-  let from = path.length - 1;
-  for (const [e, n] of pts.slice(1)) {
-    let best = -1;
-    let bestD = CHAIN_NEAR_M ** 2;
-    path.forEach((p, k) => {
-      const d = (p.e_m - e) ** 2 + (p.n_m - n) ** 2;
-      if (d <= bestD) { best = k; bestD = d; }
-    });
-    if (best < 0) return pts;
-    from = Math.min(from, best);
+/** A convoy's chain at time tc through the members' positions `pts` (column order, head
+ * first; `tracks` theirs): from each member to the one ahead of it along the road that one
+ * drove (a follower drives the path of the car ahead; it can be 30 s behind, 200 m or more
+ * round a bend, where a straight link would cut across the map). A straight link only
+ * between two members where the one ahead's path held in the page does not pass within
+ * CHAIN_NEAR_M of the other. */
+export function chainAlongRoad(tracks, pts, tc) {
+  const line = [pts[pts.length - 1]];
+  for (let k = pts.length - 1; k > 0; k -= 1) {
+    line.push(...roadBetween(tracks[k - 1], pts[k], tc), pts[k - 1]);
   }
-  return [...path.slice(from).map((p) => [p.e_m, p.n_m]), pts[0]];
+  return line;
 }
 
-const CHAIN_SPAN_S = 120; // how far back the head's path is searched for its followers (s)
-const CHAIN_NEAR_M = 10; // a follower on the head's path is this close to one of its points
+/** The points of `ahead`'s path from the one nearest `from` (within CHAIN_NEAR_M, in the
+ * CHAIN_SPAN_S before tc) to its last before tc; none when it does not pass there. */
+function roadBetween(ahead, from, tc) {
+  const path = ahead ? ahead.points.filter((p) => p.t_s <= tc && p.t_s >= tc - CHAIN_SPAN_S) : [];
+  let best = -1;
+  let bestD = CHAIN_NEAR_M ** 2;
+  path.forEach((p, k) => {
+    const d = (p.e_m - from[0]) ** 2 + (p.n_m - from[1]) ** 2;
+    if (d <= bestD) { best = k; bestD = d; }
+  });
+  return best < 0 ? [] : path.slice(best).map((p) => [p.e_m, p.n_m]);
+}
+
+const CHAIN_SPAN_S = 120; // how far back a member's path is searched for its follower (s)
+const CHAIN_NEAR_M = 10; // a follower on the path ahead is this close to one of its points
 
 function dur(ev) {
   return Math.max(0, (ev.t_end_s ?? ev.t_s) - ev.t_s);
@@ -178,8 +183,8 @@ export class ActivityLayer {
           ids = ev.track_ids;
           pts = tracks.map((tr) => where(tr, tc));
         }
-        const head = tracks[ev.track_ids.indexOf(ids[0])];
-        add(new ol.geom.LineString(alongHead(head, pts, tc)), "chain");
+        const drawn = ids.map((id) => tracks[ev.track_ids.indexOf(id)]);
+        add(new ol.geom.LineString(chainAlongRoad(drawn, pts, tc)), "chain");
         pts.forEach((p, k) => add(new ol.geom.Point(p), "member", { label: String(ev.track_ids.indexOf(ids[k]) + 1) }));
         add(new ol.geom.Point(pts[0]), "label", { label: convoyLabel(ev), offset: -22 });
         items.push({ kind: ev.kind, key: ev.key, track_ids: ev.track_ids, members: pts, member_ids: ids, duration_s: dur(ev) });
