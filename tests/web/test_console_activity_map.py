@@ -216,6 +216,13 @@ def test_each_activity_kind_is_drawn_as_itself(activity_server, page):
         or selected_roles()
     )
     assert "link" in roles and roles.count("path") == 2
+    # and its label wins the declutter: the labels layer renders it first
+    first = page.evaluate(
+        "(() => { const l = window.demtrack.activity.labels;"
+        " return l.getSource().getFeatures().sort(l.getRenderOrder())"
+        ".map(f => f.get('sel')); })()"
+    )
+    assert first[0] is True and first.count(True) == 1
     page.evaluate(
         "(() => { const m = window.demtrack.map; const s = m.map.getLayers().getArray()"
         ".find(l => l.get('name') === 'activity').getSource();"

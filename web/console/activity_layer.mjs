@@ -95,6 +95,9 @@ export class ActivityLayer {
       source: new ol.source.Vector(),
       style: (f, res) => this.style(f, res),
       declutter: "activity", // decluttered among themselves only
+      // what is rendered first wins the declutter: the selected episode's label, then in
+      // the order drawn (OpenLayers' own order is its feature ids, not the source's order)
+      renderOrder: (a, b) => Number(b.get("sel")) - Number(a.get("sel")) || a.get("n") - b.get("n"),
       zIndex: 8,
     });
     this.labels.set("name", "activity-labels");
@@ -145,7 +148,12 @@ export class ActivityLayer {
       const add = (geom, role, extra = {}) => {
         const f = new ol.Feature(geom);
         f.setProperties({ kind: ev.kind, role, sel, event: ev, ...extra });
-        (role === "label" ? labels : feats).push(f);
+        if (role === "label") {
+          f.set("n", labels.length);
+          labels.push(f);
+        } else {
+          feats.push(f);
+        }
         return f;
       };
       const d = ev.details || {};
@@ -176,18 +184,20 @@ export class ActivityLayer {
         // every member where it was last seen.
         const tc = Math.min(t, ev.t_end_s ?? ev.t_s);
         const at = tracks.map((tr) => (tr ? positionAt(tr, tc) : null));
-        let ids = ev.track_ids.filter((_, k) => at[k]);
-        let pts = at.filter(Boolean).map((p) => [p.e_m, p.n_m]);
-        if (!pts.length) {
+        let ks = at.flatMap((p, k) => (p ? [k] : [])); // places in the column drawn
+        let pts = ks.map((k) => [at[k].e_m, at[k].n_m]);
+        if (!ks.length) {
           if (!tracks.every(Boolean)) continue;
-          ids = ev.track_ids;
+          ks = tracks.map((_, k) => k);
           pts = tracks.map((tr) => where(tr, tc));
         }
-        const drawn = ids.map((id) => tracks[ev.track_ids.indexOf(id)]);
-        add(new ol.geom.LineString(chainAlongRoad(drawn, pts, tc)), "chain");
-        pts.forEach((p, k) => add(new ol.geom.Point(p), "member", { label: String(ev.track_ids.indexOf(ids[k]) + 1) }));
+        add(new ol.geom.LineString(chainAlongRoad(ks.map((k) => tracks[k]), pts, tc)), "chain");
+        pts.forEach((p, j) => add(new ol.geom.Point(p), "member", { label: String(ks[j] + 1) }));
         add(new ol.geom.Point(pts[0]), "label", { label: convoyLabel(ev), offset: -22 });
-        items.push({ kind: ev.kind, key: ev.key, track_ids: ev.track_ids, members: pts, member_ids: ids, duration_s: dur(ev) });
+        items.push({
+          kind: ev.kind, key: ev.key, track_ids: ev.track_ids, members: pts,
+          member_ids: ks.map((k) => ev.track_ids[k]), duration_s: dur(ev),
+        });
       }
       if (sel) { // the selected episode's tracks over its span, in the selection colour
         for (const tr of tracks) {
@@ -198,8 +208,6 @@ export class ActivityLayer {
       }
     }
     src.addFeatures(feats);
-    // the selected episode's label first: decluttering keeps what is drawn first
-    labels.sort((a, b) => Number(b.get("sel")) - Number(a.get("sel")));
     this.labels.getSource().addFeatures(labels);
     this.items = items;
   }
