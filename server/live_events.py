@@ -153,8 +153,6 @@ class LiveEvents:
         self._open: dict[str, dict[str, Any]] = {}
         self._crossings: dict[str, float] = {}
         self._closed: dict[str, float] = {}
-        #: The members each open episode was last streamed with (its start or an update).
-        self._announced: dict[str, list[int]] = {}
         self._handoff: dict[int, tuple[str | None, str | None]] = {}
         # a track's new (current, next) pair and how many evaluations in a row gave it
         self._pending: dict[int, tuple[tuple[str | None, str | None], int]] = {}
@@ -164,7 +162,6 @@ class LiveEvents:
                 self._handoff[body["track_ids"][0]] = (d.get("current"), d.get("next_sensor"))
             elif body.get("open"):
                 self._open[body["identity"]] = body
-                self._announced[body["identity"]] = body["track_ids"]
 
     # ------------------------------------------------------------------ helpers
     def _body(self, e: ActivityEvent, windows: Mapping[int, Window], identity: str) -> dict:
@@ -248,10 +245,11 @@ class LiveEvents:
             going_on = self._continued(e, ident, touch)
             if going_on is not None:
                 seen.add(going_on)
+                before = self._open[going_on]["track_ids"]
                 grown = self._extend(going_on, e, windows)
                 if grown is not None:
                     out.append(grown)
-                    if grown["track_ids"] != self._announced.get(going_on):
+                    if grown["track_ids"] != before:  # every membership change is news
                         news.add(id(grown))
                 continue
             old = self._open.get(ident)
@@ -273,13 +271,7 @@ class LiveEvents:
             out += self._zone_events(ws, windows, t_now)
         if prm.handoff_horizon_s > 0:
             out += self._handoffs(tracks, live_ids, t_now)
-        found_news = [(b, b["state"] != "update" or id(b) in news) for b in out]
-        for b, is_news in found_news:
-            if is_news and b.get("open"):
-                self._announced[b["identity"]] = b["track_ids"]
-            elif b["state"] == "end":
-                self._announced.pop(b["identity"], None)
-        return found_news
+        return [(b, b["state"] != "update" or id(b) in news) for b in out]
 
     def _continued(self, e: ActivityEvent, ident: str, touch: float) -> str | None:
         """The identity of the open episode ``e`` continues, if any.
@@ -343,7 +335,7 @@ class LiveEvents:
         body = dict(self._open.pop(ident), state="end", open=False)
         self._closed[ident] = body["t_end_s"]
         # an episode whose members changed is also over for its last members' identity
-        zone = body["details"].get("zone") if isinstance(body["details"], dict) else None
+        zone = body["details"].get("zone")
         self._closed[_identity_of(body["kind"], body["track_ids"], zone)] = body["t_end_s"]
         return body
 

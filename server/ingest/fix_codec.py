@@ -54,8 +54,9 @@ def fix_bodies(
 
     ``fixes``: :func:`~demtrack.core.geolocation.fix_builder.build_fixes` of the
     detections of ``pending`` (``detection_index`` = position in ``pending``, increasing).
-    The second value, ``[(points (k, 3), hit dicts)]`` (empty when there is no hit), is
-    what fills the hits' ``lat_deg``, ``lon_deg`` and ``h_m`` before the bodies are used.
+    The second value, ``[(points (k, 3), dicts)]`` (the hits, then the road points if any;
+    empty when there is no fix), is what fills the hits' and road points' ``lat_deg``,
+    ``lon_deg`` and ``h_m`` before the bodies are used.
     Every fix's floats reach the bodies through one ``tolist`` per array kind.
     """
     out: list[dict[str, Any] | None] = [None] * len(pending)
